@@ -1,0 +1,185 @@
+"""Partitioned Parquet files of telemetry, published atomically.
+
+Layout: ``<root>/sc=<spacecraft id>/stream=<stream>/day=<YYYY-MM-DD>/<ingest id>.parquet``, one file
+per ingest and TAI day. A file is written under a hidden temporary name in its final directory,
+fsynced, renamed into place and the directory fsynced; only then does the caller commit the catalog
+row that makes it visible. Readers open only files the catalog lists, so a crash at any point leaves
+either an unreferenced file (removed by :meth:`ParquetStore.remove_orphans` at start-up) or a
+complete, referenced one.
+
+The root may also be a URL of any pyarrow/fsspec filesystem (``ATTITUDE_DATA_URL``, e.g.
+``s3://bucket/prefix/telemetry``). Object stores have no atomic rename: each file is uploaded whole
+under its final name (an object is visible complete or not at all) and published through the
+catalog exactly as above — readers never list the store, they open the files the catalog names.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import os
+import time
+import uuid
+from collections.abc import Iterable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from processing.streams import SENSOR_COLUMN, TIME_COLUMN
+from storage.fs import Location, resolve
+
+NS_PER_DAY = 86_400 * 1_000_000_000
+EPOCH_DATE = dt.date(1970, 1, 1)
+TMP_PREFIX = ".tmp-"
+
+
+@dataclass(frozen=True)
+class WrittenFile:
+    path: str  # relative to the store root
+    day: dt.date
+    rows: int
+    t_min_tai_ns: int
+    t_max_tai_ns: int
+    sensors: tuple[str, ...]
+
+
+def _fsync_dir(path: Path) -> None:
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+class ParquetStore:
+    """Telemetry files in a local directory (the embedded default) or on a pyarrow/fsspec filesystem."""
+
+    def __init__(self, root: Path | str) -> None:
+        self.location: Location = resolve(root)
+        self.root = Path(self.location.root)  # meaningful for local stores only
+        if self.location.local:
+            self.root.mkdir(parents=True, exist_ok=True)
+
+    def _dir(self, spacecraft_id: int, stream: str, day: dt.date) -> Path:
+        return self.root / self._rel_dir(spacecraft_id, stream, day)
+
+    @staticmethod
+    def _rel_dir(spacecraft_id: int, stream: str, day: dt.date) -> str:
+        return f"sc={spacecraft_id}/stream={stream}/day={day.isoformat()}"
+
+    def write(self, spacecraft_id: int, stream: str, ingest_id: str, table: pa.Table) -> list[WrittenFile]:
+        """Write ``table`` (sorted by key, containing ``time_tai_ns``) as one file per TAI day."""
+        times = table.column(TIME_COLUMN).to_numpy()
+        day_index = np.floor_divide(times, NS_PER_DAY)
+        # Sorted by (sensor, ..., time): days are contiguous only for a single sensor/key group.
+        monotonic = bool(np.all(day_index[1:] >= day_index[:-1]))
+        order = None if monotonic else np.argsort(day_index, kind="stable")
+        sorted_days = day_index if order is None else day_index[order]
+        days, starts = np.unique(sorted_days, return_index=True)
+        bounds = [*starts[1:], len(sorted_days)]
+        written: list[WrittenFile] = []
+        try:
+            for day_i, lo, hi in zip(days, starts, bounds, strict=True):
+                if order is None:
+                    part = table.slice(lo, hi - lo)
+                else:
+                    part = table.take(pa.array(order[lo:hi]))
+                day = EPOCH_DATE + dt.timedelta(days=int(day_i))
+                written.append(self._publish(spacecraft_id, stream, ingest_id, day, part))
+        except BaseException:
+            self.remove(w.path for w in written)
+            raise
+        return written
+
+    def _publish(self, spacecraft_id: int, stream: str, ingest_id: str, day: dt.date,
+                 part: pa.Table) -> WrittenFile:
+        # Dictionary encoding only for the string columns: floats rarely repeat and trying wastes time.
+        dict_cols = [f.name for f in part.schema if pa.types.is_string(f.type)]
+        rel = f"{self._rel_dir(spacecraft_id, stream, day)}/{ingest_id}.parquet"
+        if not self.location.local:
+            self._upload(rel, part, dict_cols)
+            return self._written(rel, day, part)
+        directory = self._dir(spacecraft_id, stream, day)
+        directory.mkdir(parents=True, exist_ok=True)
+        final = directory / f"{ingest_id}.parquet"
+        tmp = directory / f"{TMP_PREFIX}{uuid.uuid4().hex}.parquet"
+        try:
+            with open(tmp, "wb") as fh:
+                pq.write_table(part, fh, compression="snappy", use_dictionary=dict_cols,
+                               write_statistics=[TIME_COLUMN])
+                fh.flush()
+                os.fsync(fh.fileno())
+            os.replace(tmp, final)
+            _fsync_dir(directory)
+        except BaseException:
+            tmp.unlink(missing_ok=True)
+            raise
+        return self._written(str(final.relative_to(self.root)), day, part)
+
+    def _upload(self, rel: str, part: pa.Table, dict_cols: list[str]) -> None:
+        """Object store: serialise completely in memory, then one upload under the final name."""
+        sink = pa.BufferOutputStream()
+        pq.write_table(part, sink, compression="snappy", use_dictionary=dict_cols,
+                       write_statistics=[TIME_COLUMN])
+        try:
+            self.location.write_bytes(rel, sink.getvalue())
+        except BaseException:
+            self.location.delete(rel)  # a failed upload must leave no object under the final name
+            raise
+
+    @staticmethod
+    def _written(rel: str, day: dt.date, part: pa.Table) -> WrittenFile:
+        times = part.column(TIME_COLUMN).to_numpy()
+        sensors = tuple(sorted(set(part.column(SENSOR_COLUMN).unique().to_pylist())))
+        return WrittenFile(path=rel, day=day, rows=part.num_rows, t_min_tai_ns=int(times.min()),
+                           t_max_tai_ns=int(times.max()), sensors=sensors)
+
+    def read(self, paths: Iterable[str], start_tai_ns: int | None = None,
+             end_tai_ns: int | None = None) -> list[pa.Table]:
+        """Read the listed files, keeping rows with start <= time <= end."""
+        filters = []
+        if start_tai_ns is not None:
+            filters.append((TIME_COLUMN, ">=", start_tai_ns))
+        if end_tai_ns is not None:
+            filters.append((TIME_COLUMN, "<=", end_tai_ns))
+        if self.location.local:
+            return [pq.read_table(self.root / p, filters=filters or None) for p in paths]
+        return [pq.read_table(self.location.path(p), filesystem=self.location.fs, filters=filters or None)
+                for p in paths]
+
+    def remove(self, paths: Iterable[str]) -> None:
+        for p in paths:
+            if self.location.local:
+                (self.root / p).unlink(missing_ok=True)
+            else:
+                self.location.delete(p)
+
+    def remove_orphans(self, referenced: set[str], older_than_s: float = 600.0) -> list[str]:
+        """Delete files the catalog does not reference (left by a crash before commit).
+
+        Only files older than ``older_than_s`` go: a younger one may belong to an ingest that another
+        process is about to commit.
+        """
+        removed: list[str] = []
+        now = time.time()
+        if not self.location.local:
+            for rel, mtime in self.location.list_files(".parquet"):
+                if rel in referenced or mtime is None or now - mtime.timestamp() < older_than_s:
+                    continue
+                self.location.delete(rel)
+                removed.append(rel)
+            return removed
+        for path in self.root.rglob("*.parquet"):
+            rel = str(path.relative_to(self.root))
+            if rel in referenced:
+                continue
+            try:
+                if now - path.stat().st_mtime < older_than_s:
+                    continue
+            except FileNotFoundError:
+                continue
+            path.unlink(missing_ok=True)
+            removed.append(rel)
+        return removed

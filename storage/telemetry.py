@@ -1,0 +1,219 @@
+"""Telemetry ingest and reads: the catalog decides which Parquet files exist.
+
+``ingest`` de-duplicates against stored samples (identity = spacecraft, stream, sensor, extra key
+columns, time), rejects conflicting values, writes the new rows and commits one ``ingest`` row with
+its ``telemetry_file`` rows in one transaction. ``read_window`` returns sorted, de-duplicated rows.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import threading
+from collections import defaultdict
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+import pyarrow as pa
+from sqlalchemy import select, text
+from sqlalchemy.orm import Session
+
+from processing.streams import TIME_COLUMN, StreamSpec
+from storage.models import Ingest, TelemetryFile
+from storage.parquet_store import ParquetStore
+
+
+class ConflictError(Exception):
+    """Uploaded rows collide with stored rows of the same identity but other values."""
+
+    def __init__(self, rows: list[dict[str, object]], total: int) -> None:
+        self.rows = rows
+        self.total = total
+        super().__init__(f"{total} rows conflict with stored samples")
+
+
+@dataclass(frozen=True)
+class IngestMeta:
+    filename: str | None
+    content_type: str
+    size_bytes: int
+    checksum_sha256: str
+    time_scale: str
+    api_key_id: str | None
+
+
+_locks: defaultdict[tuple[int, str], threading.Lock] = defaultdict(threading.Lock)
+_locks_guard = threading.Lock()
+
+
+def _stream_lock(spacecraft_id: int, stream: str) -> threading.Lock:
+    with _locks_guard:
+        return _locks[(spacecraft_id, stream)]
+
+
+def _lock_in_database(session: Session, spacecraft_id: int, stream: str) -> None:
+    """Serialise ingests of one stream across processes (PostgreSQL advisory lock)."""
+    if session.get_bind().dialect.name == "postgresql":
+        key = int.from_bytes(hashlib.sha256(f"{spacecraft_id}/{stream}".encode()).digest()[:8], "big",
+                             signed=True)
+        session.execute(text("SELECT pg_advisory_xact_lock(:k)"), {"k": key})
+
+
+def _files_in_window(session: Session, spacecraft_id: int, stream: str, start: int | None,
+                     end: int | None) -> list[TelemetryFile]:
+    q = select(TelemetryFile).where(TelemetryFile.spacecraft_id == spacecraft_id,
+                                    TelemetryFile.stream == stream)
+    if start is not None:
+        q = q.where(TelemetryFile.t_max_tai_ns >= start)
+    if end is not None:
+        q = q.where(TelemetryFile.t_min_tai_ns <= end)
+    return list(session.scalars(q.order_by(TelemetryFile.id)))
+
+
+def _sort_unique(table: pa.Table, spec: StreamSpec) -> pa.Table:
+    """Sort by the identity key and keep the first row of each identity."""
+    keys = list(spec.key_columns)
+    table = table.sort_by([(k, "ascending") for k in keys])
+    if table.num_rows < 2:
+        return table
+    same = np.ones(table.num_rows - 1, dtype=bool)
+    for k in keys:
+        col = table.column(k).to_numpy(zero_copy_only=False)
+        same &= col[1:] == col[:-1]
+    if not same.any():
+        return table
+    keep = np.concatenate([[True], ~same])
+    return table.filter(pa.array(keep))
+
+
+def read_window(session: Session, store: ParquetStore, spacecraft_id: int, spec: StreamSpec,
+                start_tai_ns: int | None = None, end_tai_ns: int | None = None,
+                sensor: str | None = None) -> pa.Table:
+    """All stored samples of one stream in [start, end], sorted by identity, without duplicates."""
+    files = _files_in_window(session, spacecraft_id, spec.name, start_tai_ns, end_tai_ns)
+    if sensor is not None:
+        files = [f for f in files if sensor in f.sensors.split(",")]
+    tables = [t for t in store.read([f.path for f in files], start_tai_ns, end_tai_ns) if t.num_rows]
+    if not tables:
+        return empty_table(spec)
+    table = pa.concat_tables(tables, promote_options="permissive")
+    if sensor is not None:
+        table = table.filter(pa.compute.equal(table.column("sensor"), sensor))
+    return _sort_unique(table, spec).select(list(empty_table(spec).schema.names))
+
+
+def arrow_schema(spec: StreamSpec) -> pa.Schema:
+    types = {"float": pa.float64(), "int": pa.int64(), "str": pa.string(), "bool": pa.bool_()}
+    return pa.schema([(TIME_COLUMN, pa.int64()), ("sensor", pa.string()),
+                      *((c.name, types[c.kind]) for c in spec.columns)])
+
+
+def empty_table(spec: StreamSpec) -> pa.Table:
+    return arrow_schema(spec).empty_table()
+
+
+def _split_new(existing: pa.Table, upload: pa.Table, spec: StreamSpec,
+               row_index: np.ndarray) -> tuple[np.ndarray, list[dict[str, object]], int]:
+    """Mask of upload rows not yet stored; conflicting rows (same identity, other values)."""
+    keys = list(spec.key_columns)
+    values = [c for c in spec.column_names if c not in keys]
+    up = upload.select(keys + values).to_pandas()
+    up["_pos"] = np.arange(len(up))
+    old = existing.select(keys + values).to_pandas()
+    merged = up.merge(old, on=keys, how="inner", suffixes=("", "_old"))
+    is_dup = np.zeros(len(up), dtype=bool)
+    is_dup[merged["_pos"].to_numpy()] = True
+    differs = np.zeros(len(merged), dtype=bool)
+    for c in values:
+        differs |= (merged[c] != merged[f"{c}_old"]).to_numpy()
+    conflicts = merged[differs]
+    rows: list[dict[str, object]] = []
+    for r in conflicts.head(100).to_dict("records"):
+        changed = [c for c in values if r[c] != r[f"{c}_old"]]
+        rows.append({
+            "row": int(row_index[r["_pos"]]),
+            "column": ",".join(changed),
+            "message": "differs from the stored sample with the same sensor and time: "
+                       + ", ".join(f"{c} stored {r[c + '_old']!r}, uploaded {r[c]!r}" for c in changed),
+        })
+    return ~is_dup, rows, int(differs.sum())
+
+
+def ingest(session: Session, store: ParquetStore, spacecraft_id: int, spec: StreamSpec,
+           table: pa.Table, row_index: np.ndarray, meta: IngestMeta) -> Ingest:
+    """Store a validated upload (canonical columns, sorted by identity, unique identities).
+
+    ``row_index`` maps each table row to its row in the original upload (for error reports).
+    Commits nothing itself: the caller's transaction commits the ingest and file rows; files written
+    here are removed again if that transaction fails (see :func:`commit_ingest`).
+    Raises :class:`ConflictError` when stored samples disagree.
+    """
+    times = table.column(TIME_COLUMN).to_numpy()
+    t0, t1 = int(times.min()), int(times.max())
+    _lock_in_database(session, spacecraft_id, spec.name)
+    files = _files_in_window(session, spacecraft_id, spec.name, t0, t1)
+    new_mask = np.ones(table.num_rows, dtype=bool)
+    if files:
+        stored = [t for t in store.read([f.path for f in files], t0, t1) if t.num_rows]
+        if stored:
+            existing = pa.concat_tables(stored, promote_options="permissive")
+            new_mask, conflicts, n_conflicts = _split_new(existing, table, spec, row_index)
+            if n_conflicts:
+                raise ConflictError(conflicts, n_conflicts)
+    n_new = int(new_mask.sum())
+    sensors = sorted(set(table.column("sensor").unique().to_pylist()))
+    record = Ingest(
+        spacecraft_id=spacecraft_id, stream=spec.name, sensor=",".join(sensors), rows=table.num_rows,
+        inserted=n_new, duplicates=table.num_rows - n_new, start_tai_ns=t0, end_tai_ns=t1,
+        filename=meta.filename, content_type=meta.content_type, size_bytes=meta.size_bytes,
+        checksum_sha256=meta.checksum_sha256, time_scale=meta.time_scale,
+        status="stored" if n_new else "duplicate", api_key_id=meta.api_key_id,
+    )
+    session.add(record)
+    session.flush()
+    if n_new:
+        new_rows = table if n_new == table.num_rows else table.filter(pa.array(new_mask))
+        written = store.write(spacecraft_id, spec.name, record.id, new_rows)
+        session.info.setdefault("written_files", []).extend(w.path for w in written)
+        for w in written:
+            session.add(TelemetryFile(
+                ingest_id=record.id, spacecraft_id=spacecraft_id, stream=spec.name, day=w.day,
+                path=w.path, rows=w.rows, t_min_tai_ns=w.t_min_tai_ns, t_max_tai_ns=w.t_max_tai_ns,
+                sensors=",".join(w.sensors),
+            ))
+    session.flush()
+    return record
+
+
+def commit_ingest(session: Session, store: ParquetStore, spacecraft_id: int, spec: StreamSpec,
+                  table: pa.Table, row_index: np.ndarray, meta: IngestMeta) -> Ingest:
+    """Run :func:`ingest` and commit; on any failure roll back and delete the files it wrote.
+
+    Ingests of one stream are serialised (a process-local lock plus, on PostgreSQL, an advisory
+    transaction lock) so that de-duplication sees every committed sample.
+    """
+    with _stream_lock(spacecraft_id, spec.name):
+        try:
+            record = ingest(session, store, spacecraft_id, spec, table, row_index, meta)
+            session.commit()
+        except BaseException:
+            session.rollback()
+            store.remove(session.info.pop("written_files", []))
+            raise
+        session.info.pop("written_files", None)
+        return record
+
+
+def referenced_paths(session: Session) -> set[str]:
+    return set(session.scalars(select(TelemetryFile.path)))
+
+
+def coverage(session: Session, spacecraft_id: int) -> pd.DataFrame:
+    """Per stream: number of stored rows and the time range (from the catalog only)."""
+    rows = session.execute(
+        select(TelemetryFile.stream, TelemetryFile.rows, TelemetryFile.t_min_tai_ns,
+               TelemetryFile.t_max_tai_ns).where(TelemetryFile.spacecraft_id == spacecraft_id)
+    ).all()
+    df = pd.DataFrame(rows, columns=["stream", "rows", "t_min_tai_ns", "t_max_tai_ns"])
+    return df.groupby("stream").agg(rows=("rows", "sum"), start_tai_ns=("t_min_tai_ns", "min"),
+                                    end_tai_ns=("t_max_tai_ns", "max")).reset_index()
