@@ -1,0 +1,49 @@
+"""Small builders shared by the API tests."""
+
+from __future__ import annotations
+
+import io
+
+import pyarrow as pa
+import pyarrow.parquet as pq
+from fastapi.testclient import TestClient
+
+CSV = {"Content-Type": "text/csv"}
+PARQUET = {"Content-Type": "application/vnd.apache.parquet"}
+ARROW = {"Content-Type": "application/vnd.apache.arrow.stream"}
+
+CONFIG = {
+    "star_trackers": {"st1": {"q_BS": [1, 0, 0, 0]}},
+    "gyro": {"q_BG": [1, 0, 0, 0]},
+    "solar_panels": [{"normal_B": [1, 0, 0], "max_current_a": 1.2},
+                     {"normal_B": [0, 1, 0], "max_current_a": 1.2}],
+}
+
+
+def make_spacecraft(client: TestClient, name: str = "sat1", config: dict | None = None) -> None:
+    r = client.post("/api/v1/spacecraft", json={"name": name, "config": CONFIG if config is None else config})
+    assert r.status_code == 201, r.text
+
+
+def parquet_bytes(table: pa.Table) -> bytes:
+    buf = io.BytesIO()
+    pq.write_table(table, buf)
+    return buf.getvalue()
+
+
+def arrow_bytes(table: pa.Table) -> bytes:
+    sink = io.BytesIO()
+    with pa.ipc.new_stream(sink, table.schema) as writer:
+        writer.write_table(table)
+    return sink.getvalue()
+
+
+def upload(client: TestClient, stream: str, body: bytes | str, headers: dict | None = None,
+           sc: str = "sat1", **params: object):
+    return client.post(f"/api/v1/spacecraft/{sc}/telemetry/{stream}", content=body,
+                       headers=headers or CSV, params=params)
+
+
+def stored_files(settings) -> list:
+    root = settings.telemetry_dir
+    return sorted(p for p in root.rglob("*.parquet")) if root.exists() else []

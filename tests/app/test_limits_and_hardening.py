@@ -1,0 +1,165 @@
+"""Limits (body size, inflated size, rows, rate), pagination, security headers, CORS, hostile uploads."""
+
+from __future__ import annotations
+
+import gzip
+import io
+from dataclasses import replace
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+import pytest
+from fastapi.testclient import TestClient
+
+from app.main import create_app
+from tests.app.helpers import CSV, PARQUET, make_spacecraft, stored_files, upload
+
+GYRO = "time,wx,wy,wz\n" + "".join(f"2023-06-01T00:00:{i:02d}Z,1,2,3\n" for i in range(60))
+
+
+@pytest.fixture
+def limited(settings):
+    def make(**changes):
+        app = create_app(replace(settings, **changes))
+        client = TestClient(app)
+        client.__enter__()
+        client.headers["Authorization"] = f"Bearer {settings.bootstrap_token}"
+        make_spacecraft(client)
+        made.append(client)
+        return client
+
+    made: list[TestClient] = []
+    yield make
+    for c in made:
+        c.__exit__(None, None, None)
+
+
+def test_body_limit_on_every_route(limited, settings):
+    client = limited(max_upload_bytes=1000)
+    r = upload(client, "gyro", GYRO)  # ~1.6 kB
+    assert r.status_code == 413 and "limit of 1000 bytes" in r.json()["detail"]
+
+    def chunks():  # no Content-Length: the limit applies while streaming
+        for _ in range(20):
+            yield b"x" * 100
+
+    r = client.post("/api/v1/spacecraft/sat1/telemetry/gyro", content=chunks(), headers=CSV)
+    assert r.status_code == 413
+    r = client.post("/api/v1/spacecraft", content=b"{" + b" " * 2000 + b"}",
+                    headers={"Content-Type": "application/json"})
+    assert r.status_code == 413
+    assert stored_files(settings) == []
+
+
+def test_gzip_uploads_and_bombs(limited, settings):
+    client = limited(max_upload_bytes=100_000)
+    r = upload(client, "gyro", gzip.compress(GYRO.encode()), {**CSV, "Content-Encoding": "gzip"})
+    assert r.status_code == 201 and r.json()["rows"] == 60
+    bomb = gzip.compress(b"0" * 50_000_000)  # 50 MB of zeros in ~50 kB
+    assert len(bomb) < 100_000
+    r = upload(client, "gyro", bomb, {**CSV, "Content-Encoding": "gzip"})
+    assert r.status_code == 413 and "inflated" in r.json()["detail"]
+    r = upload(client, "gyro", b"\x1f\x8b\x08garbage", {**CSV, "Content-Encoding": "gzip"})
+    assert r.status_code == 422
+    r = upload(client, "gyro", gzip.compress(GYRO.encode())[:30], {**CSV, "Content-Encoding": "gzip"})
+    assert r.status_code == 422 and "truncated" in r.json()["detail"]
+    r = upload(client, "gyro", GYRO, {**CSV, "Content-Encoding": "br"})
+    assert r.status_code == 415
+
+
+def test_row_limit(limited):
+    client = limited(max_upload_rows=10)
+    r = upload(client, "gyro", GYRO)
+    assert r.status_code == 413 and "10 rows per upload" in r.json()["detail"]
+
+
+def test_rate_limit_per_key(limited):
+    client = limited(rate_limit_per_minute=5)  # make_spacecraft used one request
+    statuses = [client.get("/api/v1/spacecraft").status_code for _ in range(6)]
+    assert statuses[:4] == [200] * 4 and statuses[-1] == 429
+    r = client.get("/api/v1/spacecraft")
+    assert r.status_code == 429 and int(r.headers["retry-after"]) >= 1
+
+
+def test_pagination_of_jobs(client):
+    make_spacecraft(client)
+    ids = {client.post("/api/v1/jobs", json={"type": "executor_check", "spacecraft": "sat1"}).json()["id"]
+           for _ in range(5)}
+    seen, cursor, pages = [], None, 0
+    while True:
+        r = client.get("/api/v1/jobs", params={"limit": 2, **({"cursor": cursor} if cursor else {})})
+        assert r.status_code == 200
+        seen += [j["id"] for j in r.json()]
+        pages += 1
+        cursor = r.headers.get("x-next-cursor")
+        if not cursor:
+            break
+        assert 'rel="next"' in r.headers["link"]
+    assert pages == 3 and len(seen) == 5 and set(seen) == ids
+    assert client.get("/api/v1/jobs", params={"cursor": "!!!"}).status_code == 422
+    assert client.get("/api/v1/jobs", params={"limit": 10_000}).status_code == 422
+
+
+def test_security_headers_and_no_cors_by_default(client):
+    r = client.get("/api/v1/spacecraft")
+    assert r.headers["x-content-type-options"] == "nosniff" and r.headers["x-frame-options"] == "DENY"
+    assert r.headers["cache-control"] == "no-store" and r.headers["referrer-policy"] == "no-referrer"
+    pre = client.options("/api/v1/spacecraft", headers={"Origin": "https://evil.example",
+                                                         "Access-Control-Request-Method": "GET"})
+    assert "access-control-allow-origin" not in pre.headers
+
+
+def test_cors_when_configured(limited):
+    client = limited(cors_origins=("https://ops.example",))
+    r = client.get("/api/v1/spacecraft", headers={"Origin": "https://ops.example"})
+    assert r.headers["access-control-allow-origin"] == "https://ops.example"
+    r = client.get("/api/v1/spacecraft", headers={"Origin": "https://evil.example"})
+    assert "access-control-allow-origin" not in r.headers
+
+
+def _parquet(**cols):
+    buf = io.BytesIO()
+    pq.write_table(pa.table(cols), buf)
+    return buf.getvalue()
+
+
+HOSTILE = [
+    ("non-UTF-8 CSV", b"time,wx,wy,wz\n2023-06-01T00:00:00Z,\xff\xfe,2,3\n", CSV, {}, 422),
+    ("binary garbage as CSV", bytes(range(256)) * 4, CSV, {}, 422),
+    ("ragged CSV", b"time,wx,wy,wz\n2023-06-01T00:00:00Z,1,2,3,4,5\n", CSV, {}, 422),
+    ("quote soup", b'time,wx,wy,wz\n"2023-06-01T00:00:00Z,1,2,3\n', CSV, {}, 422),
+    ("huge numbers", b"time,wx,wy,wz\n2023-06-01T00:00:00Z,1e400,2,3\n", CSV, {}, 422),
+    ("huge time", b"time,wx,wy,wz\n1e300,1,2,3\n", CSV, {}, 422),
+    ("year 99999", b"time,wx,wy,wz\n99999-06-01T00:00:00Z,1,2,3\n", CSV, {}, 422),
+    ("very long string", ("time,wx,wy,wz\n" + "9" * 100_000 + "-06-01T00:00:00Z,1,2,3\n").encode(), CSV, {}, 422),
+    ("long sensor", b"time,wx,wy,wz\n2023-06-01T00:00:00Z,1,2,3\n", CSV, {"sensor": "s" * 5000}, 422),
+    ("path-like sensor", b"time,wx,wy,wz\n2023-06-01T00:00:00Z,1,2,3\n", CSV, {"sensor": "../../etc"}, 422),
+    ("string Parquet column", _parquet(time=["2023-06-01T00:00:00Z"], wx=["x"], wy=[1.0], wz=[1.0]), PARQUET, {}, 422),
+    ("nested Parquet column", _parquet(time=[1.7e9], wx=[[1.0]], wy=[1.0], wz=[1.0]), PARQUET, {}, 422),
+    ("null Parquet values", _parquet(time=[1.7e9], wx=pa.array([None], pa.float64()), wy=[1.0], wz=[1.0]),
+     PARQUET, {}, 422),
+    ("NaN time", _parquet(time=[np.nan], wx=[1.0], wy=[1.0], wz=[1.0]), PARQUET, {}, 422),
+    ("JSON with nested objects", b'[{"time": {"a": 1}, "wx": 1, "wy": 2, "wz": 3}]',
+     {"Content-Type": "application/json"}, {}, 422),
+    ("JSON scalar", b"42", {"Content-Type": "application/json"}, {}, 422),
+    ("deeply nested JSON", b"[" * 100_000 + b"]" * 100_000, {"Content-Type": "application/json"}, {}, 422),
+]
+
+
+@pytest.mark.parametrize(("what", "body", "headers", "params", "status"), HOSTILE, ids=[h[0] for h in HOSTILE])
+def test_hostile_uploads(client, settings, what, body, headers, params, status):
+    make_spacecraft(client)
+    r = upload(client, "gyro", body, headers, **params)
+    assert r.status_code == status, (what, r.status_code, r.text[:300])
+    assert stored_files(settings) == []
+
+
+def test_path_like_names_stay_metadata(client, settings):
+    make_spacecraft(client)
+    r = upload(client, "gyro", GYRO, filename="../../../../etc/passwd")
+    assert r.status_code == 201
+    assert client.get("/api/v1/spacecraft/sat1/ingests").json()[0]["filename"] == "../../../../etc/passwd"
+    assert all(settings.telemetry_dir in p.parents for p in stored_files(settings))
+    assert client.post("/api/v1/spacecraft", json={"name": "../x"}).status_code == 422
+    assert client.get("/api/v1/spacecraft/sat1/telemetry/..%2F..%2Fetc").status_code == 404
