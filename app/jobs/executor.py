@@ -1,0 +1,155 @@
+"""Local executor: each job runs in a child process, at most ``max_jobs`` at a time.
+
+The catalog is the queue: a dispatcher thread claims queued jobs (conditional UPDATE, so several
+service processes never run one job twice), starts a process per job and supervises it:
+heartbeats while it lives, a kill on cancel (after a grace period for the cooperative cancel) or on
+timeout, and a 'failed' state with the exit code if the process dies without finishing the job.
+Running jobs whose heartbeat stopped (their service died) are failed by the periodic reaper.
+"""
+
+from __future__ import annotations
+
+import logging
+import multiprocessing as mp
+import os
+import threading
+import time
+from dataclasses import dataclass, field
+from multiprocessing.process import BaseProcess
+
+from sqlalchemy import select
+from sqlalchemy.orm import Session, sessionmaker
+
+from app.jobs import worker
+from app.settings import Settings
+from storage import jobs as jobstore
+from storage.jobs import ArtifactStore
+from storage.models import Job
+
+log = logging.getLogger("attitude.executor")
+
+CANCEL_GRACE_S = 3.0
+
+
+@dataclass
+class _Running:
+    process: BaseProcess
+    started: float
+    cancel_seen_at: float | None = None
+    killed_reason: str | None = field(default=None)
+
+
+class LocalExecutor:
+    def __init__(self, settings: Settings, sessions: sessionmaker[Session], poll_s: float = 0.25) -> None:
+        self.settings = settings
+        self.sessions = sessions
+        self.poll_s = poll_s
+        self._wake = threading.Event()
+        self._stop = threading.Event()
+        self._running: dict[str, _Running] = {}
+        self._thread: threading.Thread | None = None
+        # One BLAS thread per job process: jobs already run side by side (max_jobs), and oversubscribed
+        # OpenBLAS threads made small QR factorisations 5-10x slower on a busy 2-core machine.
+        os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+        os.environ.setdefault("OMP_NUM_THREADS", "1")
+        self._ctx = mp.get_context("forkserver")
+        self._ctx.set_forkserver_preload(["app.jobs.worker"])
+        self._last_reap = 0.0
+
+    def start(self) -> None:
+        with self.sessions.begin() as session:
+            failed = jobstore.fail_stale(session, self.settings.heartbeat_timeout_s,
+                                         "the service stopped while the job was running")
+        if failed:
+            log.warning("marked %d interrupted jobs as failed", len(failed))
+        self._thread = threading.Thread(target=self._loop, name="job-dispatcher", daemon=True)
+        self._thread.start()
+
+    def wake(self) -> None:
+        self._wake.set()
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._wake.set()
+        if self._thread is not None:
+            self._thread.join(timeout=30)
+        for job_id, run in list(self._running.items()):
+            run.process.kill()
+            run.process.join(5)
+            self._after_exit(job_id, run, "the service shut down while the job was running")
+        self._running.clear()
+
+    # -- dispatcher -------------------------------------------------------------------------------
+    def _loop(self) -> None:
+        while not self._stop.is_set():
+            try:
+                self._tick()
+            except Exception:  # noqa: BLE001 - the dispatcher must survive a database hiccup
+                log.exception("job dispatcher iteration failed")
+            self._wake.wait(self.poll_s)
+            self._wake.clear()
+
+    def _tick(self) -> None:
+        self._supervise()
+        free = self.settings.max_jobs - len(self._running)
+        if free > 0:
+            with self.sessions() as session:
+                candidates = jobstore.queued_ids(session, free)
+            for job_id in candidates:
+                with self.sessions.begin() as session:
+                    claimed = jobstore.claim(session, job_id)
+                if not claimed:
+                    continue
+                proc = self._ctx.Process(target=worker.run, args=(job_id, self.settings),
+                                         name=f"job-{job_id}", daemon=False)
+                try:
+                    proc.start()
+                except Exception as exc:  # noqa: BLE001
+                    with self.sessions.begin() as session:
+                        jobstore.set_status(session, job_id, "failed", allowed_from=("running",),
+                                            stage="failed", error=f"could not start a worker process: {exc}")
+                    continue
+                self._running[job_id] = _Running(proc, time.monotonic())
+        now = time.monotonic()
+        if now - self._last_reap > max(1.0, self.settings.heartbeat_timeout_s / 4):
+            self._last_reap = now
+            with self.sessions.begin() as session:
+                jobstore.heartbeat(session, list(self._running))
+                jobstore.fail_stale(session, self.settings.heartbeat_timeout_s,
+                                    "the job's worker stopped sending heartbeats (service or worker died)")
+
+    def _supervise(self) -> None:
+        if not self._running:
+            return
+        now = time.monotonic()
+        with self.sessions() as session:
+            rows = dict(session.execute(select(Job.id, Job.cancel_requested)
+                                        .where(Job.id.in_(list(self._running)))).all())
+        for job_id, run in list(self._running.items()):
+            if not run.process.is_alive():
+                run.process.join()
+                del self._running[job_id]
+                self._after_exit(job_id, run, None)
+                continue
+            if rows.get(job_id) and run.cancel_seen_at is None:
+                run.cancel_seen_at = now
+            if run.cancel_seen_at is not None and now - run.cancel_seen_at > CANCEL_GRACE_S:
+                run.killed_reason = "cancelled"
+                run.process.kill()
+            elif now - run.started > self.settings.job_timeout_s:
+                run.killed_reason = f"timed out after {self.settings.job_timeout_s} s"
+                run.process.kill()
+
+    def _after_exit(self, job_id: str, run: _Running, reason: str | None) -> None:
+        """The process is gone: if it did not bring the job to a final state, do it here."""
+        with self.sessions.begin() as session:
+            if run.killed_reason == "cancelled":
+                ended = jobstore.set_status(session, job_id, "cancelled", allowed_from=("running",),
+                                            stage="cancelled")
+            else:
+                why = reason or run.killed_reason or (
+                    f"the worker process exited with code {run.process.exitcode} without finishing the job")
+                ended = jobstore.set_status(session, job_id, "failed", allowed_from=("running",),
+                                            stage="failed", error=why)
+        if ended:  # partial artifacts of a job that did not finish are of no use
+            ArtifactStore(self.settings.artifacts_url).remove_job(job_id)

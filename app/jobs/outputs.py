@@ -1,0 +1,70 @@
+"""Turn a TaskResult into stored artifacts: tables (Parquet + CSV), figures (PNG), summary (JSON)."""
+
+from __future__ import annotations
+
+import io
+import json
+import math
+from typing import Any
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.csv as pacsv
+import pyarrow.parquet as pq
+from matplotlib.figure import Figure
+
+from processing import timescales
+from processing.tasks import TaskResult
+from storage.jobs import ArtifactStore, StoredArtifact
+
+
+def jsonable(value: Any) -> Any:
+    """Plain JSON types only: numpy scalars/arrays converted, non-finite floats -> None."""
+    if isinstance(value, dict):
+        return {str(k): jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [jsonable(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return jsonable(value.tolist())
+    if isinstance(value, np.generic):
+        return jsonable(value.item())
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def table_to_arrow(columns: dict[str, Any]) -> pa.Table:
+    """Columns -> Arrow; a ``time_tai_ns`` column gets an ISO UTC ``time`` column in front of it."""
+    arrays: dict[str, Any] = {}
+    if "time_tai_ns" in columns:
+        arrays["time"] = pa.array(timescales.tai_ns_to_iso(np.asarray(columns["time_tai_ns"], np.int64)))
+    for name, values in columns.items():
+        arr = np.asarray(values)
+        arrays[name] = pa.array(arr.tolist() if arr.dtype == object else arr)
+    return pa.table(arrays)
+
+
+def write_outputs(store: ArtifactStore, job_id: str, result: TaskResult,
+                  figures: dict[str, Figure], summary: dict[str, Any]) -> list[StoredArtifact]:
+    out: list[StoredArtifact] = []
+    out.append(store.write(job_id, "summary.json", json.dumps(summary, indent=2).encode(), kind="summary",
+                           media_type="application/json", description="job summary"))
+    for name, columns in result.tables.items():
+        table = table_to_arrow(columns)
+        buf = io.BytesIO()
+        pq.write_table(table, buf)
+        out.append(store.write(job_id, f"{name}.parquet", buf.getvalue(), kind="table",
+                               media_type="application/vnd.apache.parquet", description=f"table {name}"))
+        buf = io.BytesIO()
+        pacsv.write_csv(table, buf)
+        out.append(store.write(job_id, f"{name}.csv", buf.getvalue(), kind="table", media_type="text/csv",
+                               description=f"table {name}"))
+    for name, (content, media_type) in result.files.items():
+        out.append(store.write(job_id, name, content, kind="file", media_type=media_type,
+                               description=f"file {name}"))
+    for name, fig in figures.items():
+        buf = io.BytesIO()
+        fig.savefig(buf, format="png", dpi=110, bbox_inches="tight")
+        out.append(store.write(job_id, f"{name}.png", buf.getvalue(), kind="figure", media_type="image/png",
+                               description=str(fig.get_label() or name)))
+    return out

@@ -1,0 +1,107 @@
+"""Partitioned processing inside a job: split a long window by time, run the parts in parallel, merge.
+
+For algorithms whose work splits by time (screening, per-window fits, spectra of segments), a job
+type's ``run`` cuts its inputs with :func:`time_partitions` / :func:`split_columns` and calls
+:func:`map_partitions`, then merges the results itself. Where the parts run:
+
+- on a Dask worker (``ATTITUDE_EXECUTOR=dask``): as tasks of the same cluster, submitted from the job
+  with ``distributed.worker_client`` (the job's thread secedes while it waits, so a cluster of
+  single-threaded workers cannot deadlock);
+- elsewhere (local executor, tests): in a thread pool of the job's worker process (numpy releases
+  the GIL in its heavy loops), or in order when there is one part.
+
+``func`` must be a module-level function (Dask pickles it by reference), pure and deterministic, so
+both paths give the same results; the results come back in the order of ``parts``.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Mapping, Sequence
+from concurrent.futures import ThreadPoolExecutor
+from typing import Any, TypeVar
+
+import numpy as np
+from numpy.typing import NDArray
+
+from processing.tasks import Progress, no_progress
+
+T = TypeVar("T")
+R = TypeVar("R")
+
+NS_PER_S = 1_000_000_000
+
+
+def time_partitions(start_tai_ns: int, end_tai_ns: int, partition_s: float,
+                    overlap_s: float = 0.0) -> list[tuple[int, int]]:
+    """Cut [start, end] into consecutive parts of ``partition_s`` (the last one shorter), each widened by
+    ``overlap_s`` on both sides (clipped to the window) for algorithms that need context at the edges.
+
+    Returns (lo, hi) TAI ns pairs; a sample belongs to a part when lo <= t < hi (the last part includes end).
+    """
+    if partition_s <= 0:
+        raise ValueError(f"partition_s must be positive, got {partition_s}")
+    if end_tai_ns < start_tai_ns:
+        raise ValueError(f"end ({end_tai_ns}) is before start ({start_tai_ns})")
+    step = int(round(partition_s * NS_PER_S))
+    pad = int(round(overlap_s * NS_PER_S))
+    edges = list(range(start_tai_ns, end_tai_ns, step)) or [start_tai_ns]
+    parts = []
+    for i, lo in enumerate(edges):
+        hi = end_tai_ns + 1 if i == len(edges) - 1 else lo + step
+        parts.append((max(start_tai_ns, lo - pad), min(end_tai_ns + 1, hi + pad)))
+    return parts
+
+
+def split_columns(columns: Mapping[str, NDArray[Any]], parts: Sequence[tuple[int, int]],
+                  time_column: str = "time_tai_ns") -> list[dict[str, NDArray[Any]]]:
+    """The rows of ``columns`` in each part (lo <= t < hi), as views or copies of the arrays."""
+    t = np.asarray(columns[time_column])
+    out = []
+    for lo, hi in parts:
+        mask = (t >= lo) & (t < hi)
+        out.append({k: np.asarray(v)[mask] for k, v in columns.items()})
+    return out
+
+
+def _dask_client_available() -> bool:
+    try:
+        from distributed import get_worker
+    except ImportError:
+        return False
+    try:
+        get_worker()
+    except ValueError:
+        return False
+    return True
+
+
+def map_partitions(func: Callable[[T], R], parts: Sequence[T], *, progress: Progress = no_progress,
+                   stage: str = "partitions", max_workers: int | None = None) -> list[R]:
+    """``[func(p) for p in parts]``, in parallel where the job runs (see the module docstring)."""
+    n = len(parts)
+    if n == 0:
+        return []
+    if n > 1 and _dask_client_available():
+        from distributed import as_completed, worker_client
+
+        with worker_client(separate_thread=True) as client:
+            futures = client.map(func, list(parts), pure=False)
+            for done, _ in enumerate(as_completed(futures), start=1):
+                progress(done / n, f"{stage} {done}/{n}")
+            results: list[R] = client.gather(futures)
+            return results
+    if n == 1 or max_workers == 1:
+        results = []
+        for i, p in enumerate(parts):
+            results.append(func(p))
+            progress((i + 1) / n, f"{stage} {i + 1}/{n}")
+        return results
+    workers = max_workers or min(n, os.cpu_count() or 1)
+    with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="partition") as pool:
+        futures_local = [pool.submit(func, p) for p in parts]
+        out = []
+        for i, f in enumerate(futures_local):
+            out.append(f.result())
+            progress((i + 1) / n, f"{stage} {i + 1}/{n}")
+        return out

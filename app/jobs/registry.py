@@ -1,0 +1,48 @@
+"""Job types: name -> (parameters model, streams needed, pure task, figures).
+
+Each job type lives in ``app/jobs/types/<name>.py`` and exposes ``JOB = JobType(...)``; the task it
+wraps is a pure function in ``processing/``. Add new modules to ``_MODULES``.
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from matplotlib.figure import Figure
+from pydantic import BaseModel
+
+from processing.tasks import Progress, TaskInputs, TaskResult
+
+
+@dataclass(frozen=True)
+class JobType:
+    name: str
+    title: str
+    paper: str  # e.g. "003 §1" or "" for service jobs
+    params: type[BaseModel]
+    run: Callable[[TaskInputs, Any, Progress], TaskResult]
+    streams: tuple[str, ...] = ()  # all must have samples in the window (checked at submission)
+    optional_streams: tuple[str, ...] = ()
+    any_stream: bool = False  # True: load every stream; at least one must have samples
+    figures: Callable[[TaskResult, Any], dict[str, Figure]] = field(default=lambda result, params: {})
+    description: str = ""
+    reference: tuple[str, ...] = ()  # reference kinds the task can use (each optional)
+    produces_calibration: str | None = None  # on success with summary["calibration_complete"]: a new version
+    applies_calibration: str | None = None  # the runner applies the pinned version to the inputs ("gyro")
+    # extra report sections (app.reports.sections: ReportContext -> sequence of ReportSection)
+    report_sections: Callable[[Any], Sequence[Any]] | None = None
+
+
+_MODULES = ("coverage", "executor_check", "star_tracker_accuracy", "gyro_bias_fit", "orbital_attitude", "gyroless_ekf",
+            "alignment_calibration", "data_screening", "vector_attitude", "reconstruction")
+
+
+def registry() -> dict[str, JobType]:
+    jobs = {}
+    for module in _MODULES:
+        job: JobType = importlib.import_module(f"app.jobs.types.{module}").JOB
+        jobs[job.name] = job
+    return jobs

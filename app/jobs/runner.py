@@ -1,0 +1,228 @@
+"""Run one job: load its window from storage, call the pure task, store summary and artifacts.
+
+Runs in a worker process (local executor) or on a Dask worker; talks to the catalog and the stores
+only through ``Settings``. Every outcome ends in a final state: succeeded, failed (with the reason)
+or cancelled.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+import traceback
+from typing import Any
+
+import numpy as np
+import pyarrow.parquet as pq
+from sqlalchemy import select
+from sqlalchemy.orm import Session, sessionmaker
+
+from app.jobs.outputs import jsonable, write_outputs
+from app.jobs.registry import JobType, registry
+from app.reports.inputs import describe_inputs
+from app.settings import Settings
+from processing.gyro_calibration import apply_gyro_calibration
+from processing.screening_flags import filter_streams
+from processing.streams import STREAMS
+from processing.tasks import ReferenceData, TaskError, TaskInputs
+from storage import jobs as jobstore
+from storage.calibrations import add_version
+from storage.db import make_engine, session_factory
+from storage.jobs import ArtifactStore
+from storage.models import Artifact, Calibration, Job, ReferenceDataset, SpacecraftConfig
+from storage.parquet_store import ParquetStore
+from storage.reference import ReferenceStore
+from storage.telemetry import read_window
+
+log = logging.getLogger("attitude.jobs")
+
+
+class JobCancelled(Exception):
+    pass
+
+
+class ProgressReporter:
+    """Progress callback for tasks: stores progress (at most every 0.5 s) and honours cancels."""
+
+    def __init__(self, sessions: sessionmaker[Session], job_id: str, min_interval_s: float = 0.5) -> None:
+        self.sessions = sessions
+        self.job_id = job_id
+        self.min_interval_s = min_interval_s
+        self._last = 0.0
+
+    def __call__(self, fraction: float, stage: str) -> None:
+        now = time.monotonic()
+        if now - self._last < self.min_interval_s and fraction < 1.0:
+            return
+        self._last = now
+        with self.sessions.begin() as session:
+            cancel = jobstore.report_progress(session, self.job_id, fraction, stage)
+        if cancel:
+            raise JobCancelled()
+
+
+def stream_names(job_type: JobType) -> tuple[str, ...]:
+    if job_type.any_stream:
+        return tuple(STREAMS)
+    return job_type.streams + job_type.optional_streams
+
+
+def load_inputs(session: Session, settings: Settings, job: Job,
+                job_type: JobType) -> tuple[TaskInputs, list[str]]:
+    """The task's inputs and notes on what was done to them (calibration applied)."""
+    store = ParquetStore(settings.telemetry_url)
+    config = session.scalar(select(SpacecraftConfig.config).where(
+        SpacecraftConfig.spacecraft_id == job.spacecraft_id, SpacecraftConfig.version == job.config_version))
+    streams: dict[str, dict[str, np.ndarray]] = {}
+    for name in stream_names(job_type):
+        table = read_window(session, store, job.spacecraft_id, STREAMS[name], job.start_tai_ns, job.end_tai_ns)
+        if table.num_rows:
+            streams[name] = {c: table.column(c).to_numpy(zero_copy_only=False) for c in table.column_names}
+    missing = [s for s in job_type.streams if s not in streams]
+    if missing:
+        raise TaskError(f"no {', '.join(missing)} samples in the job window")
+    if job_type.any_stream and not streams:
+        raise TaskError("no telemetry in the job window")
+    screening_id = (job.reference or {}).get(SCREENING_KEY)
+    screening_note: list[str] = []
+    if screening_id is not None:
+        streams = _apply_screening(session, settings, screening_id, streams)
+        screening_note = [f"only samples accepted by data_screening job {screening_id} were used"]
+    if job_type.applies_calibration:
+        streams, config, notes = _apply_calibration(session, job, job_type.applies_calibration, streams,
+                                                    dict(config or {}))
+    else:
+        notes = []
+    notes = screening_note + notes
+    references = ReferenceStore(settings.reference_url)
+    reference: dict[str, ReferenceData] = {}
+    for kind, dataset_id in (job.reference or {}).items():
+        if kind.startswith(CALIBRATION_PREFIX) or kind == SCREENING_KEY:
+            continue
+        dataset = session.get(ReferenceDataset, dataset_id)
+        if dataset is None:
+            raise TaskError(f"reference data set {dataset_id} ({kind}) chosen for this job no longer exists")
+        reference[kind] = ReferenceData(id=dataset.id, name=dataset.name, columns=references.columns(dataset),
+                                        details=dataset.details)
+    return TaskInputs(streams=streams, config=config or {}, start_tai_ns=job.start_tai_ns,
+                      end_tai_ns=job.end_tai_ns, reference=reference), notes
+
+
+CALIBRATION_PREFIX = "calibration:"
+SCREENING_KEY = "screening"
+
+
+def _apply_screening(session: Session, settings: Settings, screening_job_id: str,
+                     streams: dict[str, dict[str, np.ndarray]]) -> dict[str, dict[str, np.ndarray]]:
+    """Drop the samples a data_screening job rejected (002: later jobs use accepted samples only)."""
+    art = session.scalar(select(Artifact).where(Artifact.job_id == screening_job_id,
+                                                Artifact.name == "flags.parquet"))
+    if art is None:
+        raise TaskError(f"data_screening job {screening_job_id} has no flags table")
+    table = pq.read_table(ArtifactStore(settings.artifacts_url).path(art))
+    flags = {c: table.column(c).to_numpy(zero_copy_only=False) for c in table.column_names}
+    return filter_streams(streams, flags)
+
+
+def _apply_calibration(session: Session, job: Job, kind: str, streams: dict[str, dict[str, np.ndarray]],
+                       config: dict[str, Any]) -> tuple[dict[str, dict[str, np.ndarray]], dict[str, Any], list[str]]:
+    """Apply the calibration version pinned at submission to the gyro streams (000, eq. 2).
+
+    The calibrated data are in the body frame, so the configuration handed to the task gets an
+    identity gyro mounting."""
+    cal_id = (job.reference or {}).get(CALIBRATION_PREFIX + kind)
+    if cal_id is None or kind != "gyro":
+        return streams, config, []
+    cal = session.get(Calibration, cal_id)
+    if cal is None:
+        raise TaskError(f"the {kind} calibration {cal_id} chosen for this job no longer exists")
+    v = cal.values
+    for name, cols, interval in (("gyro", ("wx", "wy", "wz"), None),
+                                 ("gyro_increments", ("dax", "day", "daz"), "interval_s")):
+        if name not in streams:
+            continue
+        data = dict(streams[name])
+        x = np.stack([data[c] for c in cols], axis=-1)
+        y = apply_gyro_calibration(x, q_BG=v["q_BG"], scale_factor_error=v["scale_factor_error"],
+                                   drift_rad_s=v["drift_rad_s"],
+                                   interval_s=data[interval] if interval else None)
+        data.update({c: np.ascontiguousarray(y[:, i]) for i, c in enumerate(cols)})
+        streams[name] = data
+    config["gyro"] = {**config.get("gyro", {}), "q_BG": [1.0, 0.0, 0.0, 0.0]}
+    return streams, config, [f"gyro data corrected with calibration version {cal.version} (id {cal.id}, from job "
+                             f"{cal.job_id}): mounting, scale factor and drift; gyro rates are in the body frame"]
+
+
+def input_counts(inputs: TaskInputs) -> dict[str, dict[str, int]]:
+    counts: dict[str, dict[str, int]] = {}
+    for name, cols in inputs.streams.items():
+        sensors, n = np.unique(np.asarray(cols["sensor"], dtype=object).astype(str), return_counts=True)
+        counts[name] = {str(s): int(k) for s, k in zip(sensors, n, strict=True)}
+    return counts
+
+
+def execute(job_id: str, settings: Settings) -> str:
+    """Run a claimed (running) job to a final state; returns that state."""
+    engine = make_engine(settings.database_url)
+    sessions = session_factory(engine)
+    artifacts = ArtifactStore(settings.artifacts_url)
+    try:
+        return _execute(job_id, settings, sessions, artifacts)
+    finally:
+        engine.dispose()
+
+
+def _finish(sessions: sessionmaker[Session], job_id: str, state: str, **values: Any) -> bool:
+    with sessions.begin() as session:
+        return jobstore.set_status(session, job_id, state, allowed_from=("running",), **values)
+
+
+def _execute(job_id: str, settings: Settings, sessions: sessionmaker[Session], artifacts: ArtifactStore) -> str:
+    progress = ProgressReporter(sessions, job_id)
+    try:
+        with sessions() as session:
+            job = session.get(Job, job_id)
+            if job is None or job.status != "running":
+                return job.status if job else "missing"
+            job_type = registry()[job.type]
+            params = job_type.params.model_validate(job.params)
+            progress(0.01, "loading telemetry")
+            inputs, input_notes = load_inputs(session, settings, job, job_type)
+            spacecraft_id = job.spacecraft_id
+        progress(0.05, "computing")
+        result = job_type.run(inputs, params, progress)
+        progress(0.9, "drawing figures")
+        figures = job_type.figures(result, params)
+        summary = jsonable(result.summary)
+        stored = write_outputs(artifacts, job_id, result, figures, summary)
+        with sessions.begin() as session:
+            jobstore.add_artifacts(session, job_id, stored)
+            done = jobstore.set_status(
+                session, job_id, "succeeded", allowed_from=("running",), progress=1.0, stage="done",
+                result={"summary": summary, "inputs": input_counts(inputs),
+                        "input_coverage": jsonable(describe_inputs(inputs.streams, inputs.start_tai_ns,
+                                                                   inputs.end_tai_ns)),
+                        "notes": input_notes + list(result.notes)})
+            if done and job_type.produces_calibration and summary.get("calibration_complete"):
+                add_version(session, spacecraft_id, job_type.produces_calibration, summary["calibration"], job_id)
+            if not done:
+                session.rollback()
+        if not done:
+            artifacts.remove_job(job_id)
+            with sessions() as session:
+                job = session.get(Job, job_id)
+                return job.status if job else "missing"
+        return "succeeded"
+    except JobCancelled:
+        artifacts.remove_job(job_id)
+        _finish(sessions, job_id, "cancelled", stage="cancelled")
+        return "cancelled"
+    except (TaskError, ValueError) as exc:
+        artifacts.remove_job(job_id)
+        _finish(sessions, job_id, "failed", stage="failed", error=str(exc) or type(exc).__name__)
+        return "failed"
+    except Exception as exc:  # noqa: BLE001 - every failure must end the job with a reason
+        log.error("job %s crashed:\n%s", job_id, traceback.format_exc())
+        artifacts.remove_job(job_id)
+        _finish(sessions, job_id, "failed", stage="failed", error=f"internal error: {type(exc).__name__}: {exc}")
+        return "failed"

@@ -1,0 +1,305 @@
+"""Job ``reconstruction``: a pipeline of the registered analysis jobs on one window, one report.
+
+Stages, in order, each the ``run`` of its registered job type (those not registered are left out and
+named in the notes): data_screening -> star_tracker_accuracy -> gyro_bias_fit -> orbital_attitude ->
+alignment_calibration (the last only "where configured": the configuration has a gyro and a star
+tracker, or ``calibrate_alignment`` is true).
+
+What flows between stages:
+
+- **screened data**: when data_screening succeeded, the samples its per-sample flags reject are removed
+  from the inputs of every later stage (see :func:`apply_screening` for the flag tables understood);
+- **calibrations**: when gyro_bias_fit succeeded, its body-frame bias (``w_meas = w_true + b``) is
+  removed from the gyro rates given to orbital_attitude (``w_G - R(q_BG)^T b_B``); alignment_calibration
+  gets the screened but uncorrected rates, since it estimates the drift itself. The values used are
+  listed under ``calibrations`` in the summary.
+
+Progress is weighted by the stages' typical cost; a stage that fails with a task error ends the
+pipeline (or, with ``continue_on_error``, is recorded and the next stage runs). The summary has every
+stage's own summary under ``stages.<name>``; tables, files and figures keep their names, prefixed with
+the stage (``gyro_bias_fit__residuals.csv``), so the standard job report is the combined report.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+from matplotlib.figure import Figure
+from numpy.typing import NDArray
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+from app.jobs.registry import JobType
+from processing import rotations
+from processing.streams import STREAMS
+from processing.tasks import Progress, TaskError, TaskInputs, TaskResult
+
+STAGES: tuple[tuple[str, float], ...] = (  # (job type, relative cost for the progress bar)
+    ("data_screening", 1.0),
+    ("star_tracker_accuracy", 2.0),
+    ("gyro_bias_fit", 3.0),
+    ("orbital_attitude", 1.0),
+    ("alignment_calibration", 2.0),
+)
+STAGE_NAMES = tuple(name for name, _ in STAGES)
+SEPARATOR = "__"
+PROGRESS_SPAN = (0.05, 0.88)  # the runner reports 0.05 before the task and 0.9 after it
+BIAS_CORRECTED_STAGES = ("orbital_attitude",)
+
+
+class Params(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    stages: list[str] | None = Field(None, description=f"stages to run, in pipeline order; default: every "
+                                                       f"registered one of {', '.join(STAGE_NAMES)}")
+    stage_params: dict[str, dict[str, Any]] = Field(default_factory=dict,
+                                                    description="parameters of each stage's job type")
+    calibrate_alignment: bool | None = Field(None, description="run alignment_calibration; default: when the "
+                                                               "configuration has a gyro and a star tracker")
+    apply_screening: bool = Field(True, description="drop the samples data_screening rejects from later stages")
+    apply_gyro_bias: bool = Field(True, description="remove the fitted gyro bias from the rates of "
+                                                    "orbital_attitude")
+    continue_on_error: bool = Field(False, description="record a failing stage and go on with the next")
+
+
+def _available() -> dict[str, JobType]:
+    from app.jobs.registry import registry
+
+    jobs = registry()
+    return {name: jobs[name] for name in STAGE_NAMES if name in jobs}
+
+
+def _stage_params(available: Mapping[str, JobType], params: Params) -> dict[str, BaseModel]:
+    unknown = sorted(set(params.stage_params) - set(STAGE_NAMES))
+    if unknown:
+        raise TaskError(f"stage_params for unknown stages {unknown}; stages: {', '.join(STAGE_NAMES)}")
+    out = {}
+    for name, jt in available.items():
+        try:
+            out[name] = jt.params.model_validate(params.stage_params.get(name, {}))
+        except ValidationError as exc:
+            raise TaskError(f"stage_params.{name}: {exc}") from None
+    return out
+
+
+def plan(inputs: TaskInputs, params: Params, available: Mapping[str, JobType]) -> tuple[list[str], list[str]]:
+    """The stages to run and notes on those left out."""
+    notes = []
+    wanted = list(STAGE_NAMES) if params.stages is None else params.stages
+    bad = [s for s in wanted if s not in STAGE_NAMES]
+    if bad:
+        raise TaskError(f"unknown stages {bad}; stages: {', '.join(STAGE_NAMES)}")
+    missing = [s for s in wanted if s not in available]
+    if missing:
+        notes.append(f"stages not available in this installation: {', '.join(missing)}")
+    calibrate = params.calibrate_alignment
+    if calibrate is None:
+        calibrate = bool(inputs.config.get("gyro")) and bool(inputs.config.get("star_trackers"))
+        if not calibrate and "alignment_calibration" in available and params.stages is None:
+            notes.append("alignment_calibration skipped: the configuration has no gyro and star tracker pair")
+    order = [s for s in STAGE_NAMES if s in wanted and s in available
+             and (s != "alignment_calibration" or calibrate)]
+    if not order:
+        raise TaskError("no pipeline stage can run: " + (notes[0] if notes else "none selected"))
+    return order, notes
+
+
+def _stage_inputs(inputs: TaskInputs, streams: Mapping[str, Mapping[str, NDArray[Any]]],
+                  jt: JobType) -> TaskInputs | str:
+    """The stage's view of the window, or why it cannot run."""
+    names = tuple(STREAMS) if jt.any_stream else jt.streams + jt.optional_streams
+    present = {n: streams[n] for n in names if n in streams and len(streams[n]["time_tai_ns"])}
+    missing = [s for s in jt.streams if s not in present]
+    if missing:
+        return f"no {', '.join(missing)} samples in the window"
+    if jt.any_stream and not present:
+        return "no telemetry in the window"
+    reference = {k: v for k, v in inputs.reference.items() if k in jt.reference}
+    return TaskInputs(streams=present, config=inputs.config, start_tai_ns=inputs.start_tai_ns,
+                      end_tai_ns=inputs.end_tai_ns, reference=reference)
+
+
+def _flag_column(table: Mapping[str, NDArray[Any]]) -> NDArray[np.bool_] | None:
+    """Rejected-sample mask of a flags table: ``rejected`` true, or ``ok``/``valid``/``accepted`` false."""
+    for name in ("rejected", "reject", "flagged"):
+        if name in table:
+            return np.asarray(table[name]).astype(bool)
+    for name in ("ok", "valid", "accepted"):
+        if name in table:
+            return ~np.asarray(table[name]).astype(bool)
+    return None
+
+
+def apply_screening(streams: Mapping[str, Mapping[str, NDArray[Any]]],
+                    result: TaskResult) -> tuple[dict[str, dict[str, NDArray[Any]]], dict[str, int]]:
+    """Remove the samples a screening result rejects.
+
+    data_screening's ``flags`` table (time_tai_ns, stream, sensor, key, accepted) goes through its own
+    :func:`processing.screening_flags.filter_streams`. Otherwise understood (per-sample, keyed by time and,
+    when present, sensor): one table ``flags`` with a ``stream`` column, or per-stream tables
+    ``<stream>_flags`` / ``flags_<stream>`` / ``<stream>``; each with ``time_tai_ns`` and ``rejected`` (or
+    ``ok``/``valid``/``accepted``). Returns the screened streams and the removed samples per stream.
+    """
+    combined = result.tables.get("flags")
+    if combined is not None and {"stream", "key", "accepted"} <= set(combined):
+        try:  # data_screening's own filter (matches panel/satellite keys too)
+            from processing.screening_flags import filter_streams
+        except ImportError:
+            pass
+        else:
+            screened = filter_streams(streams, combined)
+            counts = {n: len(streams[n]["time_tai_ns"]) - len(screened[n]["time_tai_ns"] if n in screened else ())
+                      for n in streams}
+            return screened, {n: c for n, c in counts.items() if c}
+    out = {k: dict(v) for k, v in streams.items()}
+    removed: dict[str, int] = {}
+    per_stream: dict[str, list[Mapping[str, NDArray[Any]]]] = {}
+    if combined is not None and "stream" in combined:
+        stream_col = np.asarray(combined["stream"]).astype(str)
+        for name in set(stream_col.tolist()):
+            mask = stream_col == name
+            per_stream.setdefault(name, []).append({k: np.asarray(v)[mask] for k, v in combined.items()})
+    for name in streams:
+        for key in (f"{name}_flags", f"flags_{name}", name):
+            if key in result.tables:
+                per_stream.setdefault(name, []).append(result.tables[key])
+    for name, tables in per_stream.items():
+        if name not in out:
+            continue
+        cols = out[name]
+        t = np.asarray(cols["time_tai_ns"], dtype=np.int64)
+        sensors = np.asarray(cols["sensor"]).astype(str) if "sensor" in cols else np.full(t.shape, "")
+        drop = np.zeros(t.shape, dtype=bool)
+        for table in tables:
+            rejected = _flag_column(table)
+            if rejected is None or "time_tai_ns" not in table:
+                continue
+            rt = np.asarray(table["time_tai_ns"], dtype=np.int64)[rejected]
+            if "sensor" in table:
+                rs = np.asarray(table["sensor"]).astype(str)[rejected]
+                keys = set(zip(rs.tolist(), rt.tolist(), strict=True))
+                drop |= np.fromiter(((s, x) in keys for s, x in zip(sensors.tolist(), t.tolist(), strict=True)),
+                                    dtype=bool, count=t.size)
+            else:
+                drop |= np.isin(t, rt)
+        if drop.any():
+            out[name] = {k: np.asarray(v)[~drop] for k, v in cols.items()}
+            removed[name] = int(drop.sum())
+    return out, removed
+
+
+def correct_gyro_bias(gyro: Mapping[str, NDArray[Any]], bias_B: NDArray[np.float64],
+                      config: Mapping[str, Any]) -> dict[str, NDArray[Any]]:
+    """Gyro rates in the gyro frame with a body-frame bias removed: w_G - R(q_BG)^T b_B (rad/s)."""
+    q_BG = np.asarray((config.get("gyro") or {}).get("q_BG", [1.0, 0.0, 0.0, 0.0]), dtype=np.float64)
+    b_G = rotations.quat_rotate(rotations.quat_conjugate(rotations.quat_normalize(q_BG)), bias_B)
+    out = dict(gyro)
+    for i, c in enumerate(("wx", "wy", "wz")):
+        out[c] = np.asarray(gyro[c], dtype=np.float64) - b_G[i]
+    return out
+
+
+def _bias_from(summary: Mapping[str, Any]) -> NDArray[np.float64] | None:
+    value = summary.get("gyro_bias_rad_s")
+    try:
+        bias = np.asarray(value, dtype=np.float64).reshape(3)
+    except (TypeError, ValueError):
+        return None
+    return bias if np.all(np.isfinite(bias)) else None
+
+
+def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
+    available = _available()
+    order, notes = plan(inputs, params, available)
+    stage_params = _stage_params(available, params)
+    weights = dict(STAGES)
+    total = sum(weights[s] for s in order)
+    lo_span, hi_span = PROGRESS_SPAN
+    streams: dict[str, dict[str, NDArray[Any]]] = {k: dict(v) for k, v in inputs.streams.items()}
+    raw_gyro_bias_free: dict[str, NDArray[Any]] | None = None
+    stages: dict[str, dict[str, Any]] = {}
+    calibrations: dict[str, Any] = {}
+    tables: dict[str, dict[str, NDArray[Any]]] = {}
+    files: dict[str, tuple[bytes, str]] = {}
+    done = 0.0
+    for name in order:
+        jt = available[name]
+        start = lo_span + (hi_span - lo_span) * done / total
+        width = (hi_span - lo_span) * weights[name] / total
+        done += weights[name]
+
+        def stage_progress(fraction: float, stage: str, _start: float = start, _width: float = width,
+                           _name: str = name) -> None:
+            fraction = min(max(fraction, 0.0), 1.0) if math.isfinite(fraction) else 0.0
+            progress(_start + _width * fraction, f"{_name}: {stage}")
+
+        view = streams
+        if name in BIAS_CORRECTED_STAGES and raw_gyro_bias_free is not None:
+            view = {**streams, "gyro": raw_gyro_bias_free}
+        stage_inputs = _stage_inputs(inputs, view, jt)
+        if isinstance(stage_inputs, str):
+            stages[name] = {"status": "skipped", "reason": stage_inputs}
+            notes.append(f"{name} skipped: {stage_inputs}")
+            stage_progress(1.0, "skipped")
+            continue
+        stage_progress(0.0, "starting")
+        try:
+            result = jt.run(stage_inputs, stage_params[name], stage_progress)
+        except (TaskError, ValueError) as exc:  # JobCancelled and crashes propagate to the runner
+            stages[name] = {"status": "failed", "error": str(exc) or type(exc).__name__}
+            if not params.continue_on_error:
+                raise TaskError(f"pipeline stage {name} failed: {exc}") from exc
+            notes.append(f"{name} failed: {exc}")
+            continue
+        stage_progress(1.0, "done")
+        stages[name] = {"status": "succeeded", "summary": result.summary, "notes": list(result.notes),
+                        "params": stage_params[name].model_dump(mode="json")}
+        notes.extend(f"{name}: {n}" for n in result.notes)
+        for table_name, columns in result.tables.items():
+            tables[f"{name}{SEPARATOR}{table_name}"] = columns
+        for file_name, content in result.files.items():
+            files[f"{name}{SEPARATOR}{file_name}"] = content
+        if name == "data_screening" and params.apply_screening:
+            streams, removed = apply_screening(streams, result)
+            calibrations["screened_out"] = removed
+            if not removed:
+                notes.append("data_screening rejected no samples (or its flags were not understood)")
+        if name == "gyro_bias_fit" and params.apply_gyro_bias and "gyro" in streams:
+            bias = _bias_from(result.summary)
+            if bias is not None:
+                raw_gyro_bias_free = correct_gyro_bias(streams["gyro"], bias, inputs.config)
+                calibrations["gyro_bias_rad_s"] = bias.tolist()
+                calibrations["gyro_bias_applied_to"] = [s for s in BIAS_CORRECTED_STAGES if s in order]
+    summary: dict[str, Any] = {
+        "stages_run": [s for s in order if stages.get(s, {}).get("status") == "succeeded"],
+        "stages": stages,
+        "calibrations": calibrations,
+    }
+    return TaskResult(summary=summary, tables=tables, notes=notes, files=files)
+
+
+def figures(result: TaskResult, params: Params) -> dict[str, Figure]:
+    """Each succeeded stage's figures, named ``<stage>__<figure>``."""
+    available = _available()
+    out: dict[str, Figure] = {}
+    for name, stage in result.summary.get("stages", {}).items():
+        jt = available.get(name)
+        if jt is None or stage.get("status") != "succeeded":
+            continue
+        prefix = f"{name}{SEPARATOR}"
+        stage_result = TaskResult(summary=stage["summary"], notes=stage.get("notes", []),
+                                  tables={k[len(prefix):]: v for k, v in result.tables.items() if k.startswith(prefix)},
+                                  files={k[len(prefix):]: v for k, v in result.files.items() if k.startswith(prefix)})
+        stage_params = jt.params.model_validate(stage.get("params", {}))
+        for fig_name, fig in jt.figures(stage_result, stage_params).items():
+            out[f"{prefix}{fig_name}"] = fig
+    return out
+
+
+JOB = JobType(
+    name="reconstruction", title="Attitude reconstruction pipeline", paper="002, 003, 000", params=Params, run=run,
+    any_stream=True, figures=figures,
+    description="Screening -> star-tracker accuracy -> gyro fit -> orbital attitude (-> alignment calibration) on "
+                "one window, passing screened data and the gyro bias along; one combined report.",
+)

@@ -1,0 +1,154 @@
+"""Crash safety of the real server: concurrent uploads and jobs, SIGKILL at random moments, restart.
+
+After the cycles: every upload acknowledged with 201 is fully readable, no upload is partly visible,
+every catalogued file exists and reads, and no job stays queued or running. The number of cycles is
+ATTITUDE_CRASH_CYCLES (default 30 on SQLite, 10 on PostgreSQL, to keep CI within its budget).
+"""
+
+from __future__ import annotations
+
+import http.client
+import json
+import os
+import random
+import signal
+import subprocess
+import sys
+import threading
+import time
+import urllib.error
+import urllib.request
+from pathlib import Path
+
+import pyarrow.parquet as pq
+import pytest
+from sqlalchemy import create_engine, select
+
+from app.devserver import free_port
+from storage.models import TelemetryFile
+
+TOKEN = "crash-test-token"
+ROWS = 300
+pytestmark = pytest.mark.slow
+
+
+def request(base, method, path, body=None, content_type=None, timeout=10):
+    headers = {"Authorization": f"Bearer {TOKEN}"}
+    if content_type:
+        headers["Content-Type"] = content_type
+    req = urllib.request.Request(base + path, data=body, method=method, headers=headers)
+    try:
+        with urllib.request.urlopen(req, timeout=timeout) as r:
+            return r.status, r.read()
+    except urllib.error.HTTPError as e:
+        return e.code, e.read()
+
+
+def start(env, log):
+    port = free_port()
+    proc = subprocess.Popen([sys.executable, "-m", "app.cli", "serve", "--port", str(port), "--log-level", "warning"],
+                            env={**os.environ, **env}, stdout=log, stderr=log, start_new_session=True)
+    base = f"http://127.0.0.1:{port}"
+    deadline = time.monotonic() + 60
+    while True:
+        assert proc.poll() is None, "server died during start-up"
+        try:
+            if request(base, "GET", "/healthz", timeout=2)[0] == 200:
+                return proc, base
+        except OSError:
+            pass
+        assert time.monotonic() < deadline, "server did not start"
+        time.sleep(0.05)
+
+
+def batch_csv(batch: int) -> bytes:
+    t0 = 1_685_577_600 + batch * 1000  # distinct windows, 1000 s apart
+    lines = [f"{t0 + 0.5 * i:.1f},{batch},{i},{i * 0.5}" for i in range(ROWS)]
+    return ("time,wx,wy,wz\n" + "\n".join(lines) + "\n").encode()
+
+
+def rows_of(base, batch):
+    t0 = 1_685_577_600 + batch * 1000
+    status, body = request(base, "GET", f"/api/v1/spacecraft/sat/telemetry/gyro?format=json&time_scale=utc"
+                                        f"&start={t0}&end={t0 + 999}")
+    assert status == 200
+    return json.loads(body)
+
+
+def test_sigkill_during_uploads_and_jobs(tmp_path: Path, database_url: str):
+    cycles = int(os.environ.get("ATTITUDE_CRASH_CYCLES", "30" if database_url.startswith("sqlite") else "10"))
+    env = {"ATTITUDE_DATA_DIR": str(tmp_path / "data"), "ATTITUDE_DATABASE_URL": database_url,
+           "ATTITUDE_BOOTSTRAP_TOKEN": TOKEN, "ATTITUDE_JOB_HEARTBEAT_TIMEOUT_S": "2", "ATTITUDE_MAX_JOBS": "2",
+           "ATTITUDE_RATE_LIMIT_PER_MINUTE": "1000000"}
+    rng = random.Random(20261122)
+    acknowledged: set[int] = set()
+    attempted: set[int] = set()
+    next_batch = [0]
+    lock = threading.Lock()
+    with open(tmp_path / "server.log", "ab") as log:
+        for cycle in range(cycles):
+            proc, base = start(env, log)
+            if cycle == 0:
+                assert request(base, "POST", "/api/v1/spacecraft", json.dumps({"name": "sat"}).encode(),
+                               "application/json")[0] == 201
+            stop = threading.Event()
+
+            def uploader(stop: threading.Event = stop, base: str = base) -> None:
+                while not stop.is_set():
+                    with lock:
+                        batch = next_batch[0]
+                        next_batch[0] += 1
+                        attempted.add(batch)
+                    try:
+                        status, _ = request(base, "POST", "/api/v1/spacecraft/sat/telemetry/gyro", batch_csv(batch),
+                                            "text/csv")
+                    except (OSError, http.client.HTTPException):
+                        return  # the server is gone (maybe mid-answer): this batch may or may not have committed
+                    if status == 201:
+                        with lock:
+                            acknowledged.add(batch)
+
+            threads = [threading.Thread(target=uploader) for _ in range(3)]
+            for t in threads:
+                t.start()
+            try:
+                request(base, "POST", "/api/v1/jobs", json.dumps(
+                    {"type": "executor_check", "spacecraft": "sat", "params": {"duration_s": 0.3}}).encode(),
+                    "application/json")
+            except (OSError, http.client.HTTPException):
+                pass
+            time.sleep(rng.uniform(0.05, 1.0))
+            os.killpg(proc.pid, signal.SIGKILL)  # the service and its job workers die at once
+            proc.wait()
+            stop.set()
+            for t in threads:
+                t.join(30)
+
+        proc, base = start(env, log)
+        try:
+            assert len(acknowledged) > cycles, "too few uploads got through to test anything"
+            for batch in sorted(attempted):
+                rows = rows_of(base, batch)
+                if batch in acknowledged:
+                    assert len(rows) == ROWS, f"acknowledged batch {batch} has {len(rows)} of {ROWS} rows"
+                else:
+                    assert len(rows) in (0, ROWS), f"unacknowledged batch {batch} is half visible"
+                if rows:
+                    assert {r["wx"] for r in rows} == {batch}
+            engine = create_engine(database_url)
+            with engine.connect() as conn:
+                paths = conn.scalars(select(TelemetryFile.path)).all()
+            engine.dispose()
+            for p in paths:  # the catalog lists only complete, readable files
+                assert pq.read_metadata(tmp_path / "data" / "telemetry" / p).num_rows > 0
+            deadline = time.monotonic() + 30
+            while True:  # interrupted jobs end (failed by their stopped heartbeat) or finish
+                status, body = request(base, "GET", "/api/v1/jobs?limit=500")
+                active = [j for j in json.loads(body) if j["status"] in ("queued", "running")]
+                if not active:
+                    break
+                assert time.monotonic() < deadline, f"jobs left active: {active}"
+                time.sleep(0.5)
+        finally:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
