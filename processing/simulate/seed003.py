@@ -1,0 +1,358 @@
+"""Truth simulator of paper 003's configuration: Meteor-M in orbital orientation, BOKZ-M + gyros + GNSS.
+
+Pure and deterministic: the same keyword arguments give bit-identical output; no I/O. Randomness
+comes from ``numpy.random.Generator(PCG64(...))`` seeded by ``SeedSequence(seed).spawn(...)``, one
+independent generator per random quantity (attitude phases, star-tracker noise, gaps, gyro noise,
+GNSS noise), so that e.g. changing the gyro rate does not change the star-tracker noise.
+
+Model (defaults from 003):
+
+- orbit: circular, 830 km, sun-synchronous inclination (processing.orbits), two-body (no J2 node
+  drift: 0.014 deg over 20 min), inertial frame I = GCRS;
+- attitude: q_IB = q_IO_003 o q_OB(pitch, yaw, roll) (003 §1.6), pitch and roll slow oscillations
+  within +-0.3 deg (003: |alpha|, |gamma| < 0.4 deg), yaw 1.2 deg +- 0.25 deg (003: oscillation of
+  less than 0.3 deg about 1.0-1.4 deg), each a sum of three sinusoids with periods of hundreds of
+  seconds and random phases, plus a 0.4 Hz oscillation of 3 arcsec on each angle (003 §1.5:
+  rotating mirror; the paper's 2-2.7" about y1, y2, y3). The angles' axes are the body axes to
+  within the yaw angle, so the vibration is about the body axes to ~2.5 % (sin 1.45 deg);
+- body rate w_B: analytic, exactly consistent with q_IB (processing.simulate.orbital_attitude_model);
+- star tracker "st1": mounting of 003 §1.1 (:func:`mounting_q_BS_003`), q_IS = q_IB o q_BS o
+  exp(n_S) with n_S a rotation vector about the sensor axes x1 x2 x3 of std (2.5, 5, 15) arcsec
+  (003 §1.4: 2.5"/5.1"/13.1", conclusion about 3", 7", 15-20"), every 3 s, its grid shifted by
+  ``st_time_offset_s`` from the gyro grid (003 §1.2: the grids do not share nodes); a fraction of
+  the samples removed in a few contiguous blocks (gaps);
+- gyro: every 0.1 s in the gyro frame G (q_BG), w_G = dcm_GB w_B + b(t) + white noise, with
+  b(t) = b0 + b_dot (t - t0) in G, b0 = (-1.84, 4.52, 0.55) arcsec/s: the numbers of 003 §2.4
+  Delta*, used as a realistic size only. (In 003, Delta is a correction added to the measured rate,
+  w' = w_gyro + Delta, i.e. b = -Delta, and §2.4 expresses it in the star-tracker axes x1x2x3;
+  here the same numbers are the bias b of w_meas = w_true + b in the gyro frame.)
+- GNSS: every 1 s, ITRS state from the inertial truth by processing.frames.gcrs_to_itrs_state
+  with zero EOP, plus white noise 1 m and 1 mm/s per axis (003 §1.6 smoothing errors).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.random import PCG64, Generator, SeedSequence
+from numpy.typing import NDArray
+
+from processing import rotations
+from processing.frames import EarthOrientation, gcrs_to_itrs_state
+from processing.orbits import R_EARTH_M, mean_motion_rad_s, sun_synchronous_inclination_rad
+from processing.simulate.orbital_attitude_model import OrbitalAttitudeModel, SinusoidSeries
+
+ARCSEC_RAD = np.pi / (180.0 * 3600.0)
+DEG_RAD = np.pi / 180.0
+NS_PER_S = 1_000_000_000
+
+ALPHA_003_RAD = 15.0 * DEG_RAD
+"""Mounting angle alpha of 003 §1.1."""
+ST_NOISE_STD_003_RAD = (2.5 * ARCSEC_RAD, 5.0 * ARCSEC_RAD, 15.0 * ARCSEC_RAD)
+GYRO_BIAS_003_RAD_S = (-1.84 * ARCSEC_RAD, 4.52 * ARCSEC_RAD, 0.55 * ARCSEC_RAD)
+ATTITUDE_PERIODS_S = (900.0, 420.0, 230.0)
+"""Nominal periods of the slow attitude sinusoids; each is scaled by a factor in [0.8, 1.2] from the seed."""
+ATTITUDE_WEIGHTS = (0.5, 0.3, 0.2)
+"""Shares of the slow amplitude carried by the three sinusoids (sum 1, so |angle - mean| <= amp)."""
+ST_SENSOR = "st1"
+
+
+class Seed003ParameterError(ValueError):
+    """A simulator parameter outside its domain."""
+
+
+def mounting_dcm_BS_003(alpha_rad: float = ALPHA_003_RAD) -> NDArray:
+    """dcm_BS (3, 3) of 003 §1.1: body coordinates y from sensor coordinates x, y = dcm_BS @ x.
+
+    y1 = -x2, y2 = x1 sin a - x3 cos a, y3 = x1 cos a + x3 sin a (the paper's "formulas of the
+    transition from x1x2x3 to y1y2y3", confirmed by its rate relations w1 = -w^2,
+    w2 = w^1 sin a - w^3 cos a, w3 = w^1 cos a + w^3 sin a). det = sin^2 a + cos^2 a = +1. The rows of
+    dcm_BS are the body axes in sensor coordinates (y3 = (cos a, 0, sin a) in S); its columns are the
+    sensor axes in body coordinates: the boresight x3 is (0, -cos a, sin a), in the y2-y3 plane, turned
+    by alpha from -y2 (minus the orbit normal in orbital orientation) towards y3 (the zenith).
+    """
+    s, c = np.sin(alpha_rad), np.cos(alpha_rad)
+    return np.array([[0.0, -1.0, 0.0], [s, 0.0, -c], [c, 0.0, s]])
+
+
+def mounting_q_BS_003(alpha_rad: float = ALPHA_003_RAD) -> NDArray:
+    """q_BS (4,) canonical, scalar first, of the 003 §1.1 mounting (see :func:`mounting_dcm_BS_003`)."""
+    return rotations.dcm_to_quat(mounting_dcm_BS_003(alpha_rad))
+
+
+@dataclass(frozen=True)
+class Truth003:
+    """Known truth of a seed-003 scenario. Times int64 tai_ns; angles rad; rates rad/s; SI.
+
+    Gyro grid: gyro_time_tai_ns (N,), q_IB_gyro (N,4), w_B_gyro (N,3), pitch/yaw/roll_rad (N,) (003
+    §1.6 angles), gyro_bias_rad_s (N,3) bias in the gyro frame at each sample (constant unless
+    gyro_bias_drift_rad_s2 != 0), gyro_bias0_rad_s (3,) at the start time.
+    Star tracker (rows of the star_tracker stream): st_time_tai_ns (M,), q_IB_st (M,4), w_B_st (M,3),
+    q_IS_st (M,4) noise-free, st_noise_rotvec_S (M,3) the noise rotation about the sensor axes that
+    was applied, st_noise_std_rad (3,) configured std per sensor axis; st_nominal_time_tai_ns all
+    nominal times, st_removed_time_tai_ns the removed ones, st_gap_intervals_tai_ns (G,2) pairs
+    (last sample before, first sample after) of each gap.
+    GNSS: gnss_time_tai_ns (K,), r_I, v_I (GCRS), r_E, v_E (ITRS, zero EOP) noise-free (K,3).
+    """
+
+    model: OrbitalAttitudeModel
+    start_tai_ns: int
+    q_BS: NDArray
+    q_BG: NDArray
+    alpha_rad: float
+    mean_motion_rad_s: float
+    gyro_time_tai_ns: NDArray
+    q_IB_gyro: NDArray
+    w_B_gyro: NDArray
+    pitch_rad: NDArray
+    yaw_rad: NDArray
+    roll_rad: NDArray
+    gyro_bias_rad_s: NDArray
+    gyro_bias0_rad_s: NDArray
+    gyro_bias_drift_rad_s2: NDArray
+    gyro_noise_std_rad_s: float
+    st_time_tai_ns: NDArray
+    q_IB_st: NDArray
+    w_B_st: NDArray
+    q_IS_st: NDArray
+    st_noise_rotvec_S: NDArray
+    st_noise_std_rad: NDArray
+    st_nominal_time_tai_ns: NDArray
+    st_removed_time_tai_ns: NDArray
+    st_gap_intervals_tai_ns: NDArray
+    gnss_time_tai_ns: NDArray
+    r_I: NDArray
+    v_I: NDArray
+    r_E: NDArray
+    v_E: NDArray
+    gnss_position_noise_std_m: float
+    gnss_velocity_noise_std_m_s: float
+    eop: EarthOrientation
+
+
+@dataclass(frozen=True)
+class Scenario003:
+    """Simulated telemetry and its truth.
+
+    streams: {"star_tracker", "gyro", "gnss"} -> column mapping in the canonical stream schemas
+    (processing.streams): time_tai_ns (int64), sensor (str: "st1", "gyro", "gnss", the default
+    sensor names of the service), value columns (float64).
+    config: spacecraft configuration in the DESIGN.md JSON shape.
+    truth: :class:`Truth003`. parameters: the keyword arguments used.
+    """
+
+    streams: dict[str, dict[str, NDArray]]
+    config: dict[str, Any]
+    truth: Truth003
+    parameters: dict[str, Any]
+
+
+def time_grid_tai_ns(start_tai_ns: int, duration_s: float, period_s: float, offset_s: float = 0.0) -> NDArray:
+    """start + offset + k period for k = 0.. while <= start + duration, int64 ns (rounded to the ns)."""
+    n = int(np.floor((duration_s - offset_s) / period_s + 1e-9)) + 1
+    return np.int64(start_tai_ns) + np.round((offset_s + np.arange(n) * period_s) * NS_PER_S).astype(np.int64)
+
+
+def _composition(total: int, parts: int, rng: Generator) -> NDArray:
+    """Random split of ``total`` into ``parts`` positive integers (uniform over compositions)."""
+    cuts = np.sort(rng.choice(np.arange(1, total), size=parts - 1, replace=False))
+    return np.diff(np.concatenate([[0], cuts, [total]]))
+
+
+def gap_mask(n: int, gap_fraction: float, n_gaps: int, rng: Generator) -> NDArray:
+    """Boolean keep-mask (n,) with round(gap_fraction n) samples removed in ``n_gaps`` contiguous
+    blocks at random positions, never touching the first or last sample, blocks separated by at
+    least one kept sample (fewer blocks if fewer samples are removed)."""
+    m = int(round(gap_fraction * n))
+    n_gaps = min(n_gaps, m)
+    if m == 0 or n_gaps == 0:
+        return np.ones(n, dtype=bool)
+    kept = n - m
+    if kept < n_gaps + 1:
+        raise Seed003ParameterError(f"cannot place {n_gaps} gaps of {m} samples in {n} samples")
+    lengths = np.empty(2 * n_gaps + 1, dtype=np.int64)
+    lengths[0::2] = _composition(kept, n_gaps + 1, rng)
+    lengths[1::2] = _composition(m, n_gaps, rng)
+    flags = np.arange(2 * n_gaps + 1) % 2 == 0
+    return np.repeat(flags, lengths)
+
+
+def _series(mean: float, amp: float, vib_amp: float, vib_hz: float, rng: Generator) -> SinusoidSeries:
+    periods = np.asarray(ATTITUDE_PERIODS_S) * rng.uniform(0.8, 1.2, size=3)
+    phases = rng.uniform(0.0, 2.0 * np.pi, size=4)
+    return SinusoidSeries(
+        mean_rad=mean,
+        amplitudes_rad=(*(amp * np.asarray(ATTITUDE_WEIGHTS)).tolist(), vib_amp),
+        periods_s=(*periods.tolist(), 1.0 / vib_hz),
+        phases_rad=tuple(phases.tolist()),
+    )
+
+
+def _check(cond: bool, message: str) -> None:
+    if not cond:
+        raise Seed003ParameterError(message)
+
+
+def simulate_seed003(
+    *,
+    start_tai_ns: int,
+    duration_s: float = 1200.0,
+    seed: int = 0,
+    st_period_s: float = 3.0,
+    gyro_period_s: float = 0.1,
+    gnss_period_s: float = 1.0,
+    gap_fraction: float = 0.03,
+    n_st_gaps: int = 3,
+    st_time_offset_s: float = 0.037,
+    altitude_m: float = 830e3,
+    raan_rad: float = 100.0 * DEG_RAD,
+    u0_rad: float = 20.0 * DEG_RAD,
+    pitch_mean_rad: float = 0.0,
+    pitch_amplitude_rad: float = 0.3 * DEG_RAD,
+    yaw_mean_rad: float = 1.2 * DEG_RAD,
+    yaw_amplitude_rad: float = 0.25 * DEG_RAD,
+    roll_mean_rad: float = 0.0,
+    roll_amplitude_rad: float = 0.3 * DEG_RAD,
+    vibration_hz: float = 0.4,
+    vibration_amplitude_rad: tuple[float, float, float] = (3.0 * ARCSEC_RAD,) * 3,
+    alpha_rad: float = ALPHA_003_RAD,
+    st_noise_std_rad: tuple[float, float, float] = ST_NOISE_STD_003_RAD,
+    q_BG: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0),
+    gyro_bias_rad_s: tuple[float, float, float] = GYRO_BIAS_003_RAD_S,
+    gyro_bias_drift_rad_s2: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    gyro_noise_std_rad_s: float = 1.5 * ARCSEC_RAD,
+    gnss_position_noise_std_m: float = 1.0,
+    gnss_velocity_noise_std_m_s: float = 1e-3,
+) -> Scenario003:
+    """Simulate a 003 (Meteor-M) segment: star tracker, gyro and GNSS telemetry with known truth.
+
+    All arguments keyword-only; angles rad, rates rad/s, times s except ``start_tai_ns`` (int64 ns
+    since 1970-01-01T00:00:00 TAI). vibration_amplitude_rad is per angle (pitch, yaw, roll);
+    st_noise_std_rad per sensor axis (x1, x2, x3); gyro biases in the gyro frame. Grids include the
+    start and every sample up to start + duration_s. See the module docstring for the model.
+    Returns :class:`Scenario003`.
+    """
+    parameters = {k: v for k, v in locals().items() if k != "parameters"}
+    _check(duration_s > 0, f"duration_s must be > 0, got {duration_s}")
+    for name in ("st_period_s", "gyro_period_s", "gnss_period_s", "vibration_hz"):
+        _check(parameters[name] > 0, f"{name} must be > 0, got {parameters[name]}")
+    _check(0.0 <= gap_fraction < 0.5, f"gap_fraction must be in [0, 0.5), got {gap_fraction}")
+    _check(n_st_gaps >= 0, f"n_st_gaps must be >= 0, got {n_st_gaps}")
+    _check(
+        0.0 <= st_time_offset_s < st_period_s,
+        f"st_time_offset_s must be in [0, st_period_s={st_period_s}), got {st_time_offset_s}",
+    )
+    _check(altitude_m > 0, f"altitude_m must be > 0, got {altitude_m}")
+    for name in ("st_noise_std_rad", "vibration_amplitude_rad", "gyro_bias_rad_s", "gyro_bias_drift_rad_s2"):
+        _check(np.shape(parameters[name]) == (3,), f"{name} must have 3 components, got {parameters[name]!r}")
+    _check(min(st_noise_std_rad) >= 0 and gyro_noise_std_rad_s >= 0, "noise standard deviations must be >= 0")
+    _check(gnss_position_noise_std_m >= 0 and gnss_velocity_noise_std_m_s >= 0, "GNSS noise must be >= 0")
+    _check(np.shape(q_BG) == (4,), f"q_BG must have 4 components, got {q_BG!r}")
+
+    rng_attitude, rng_st, rng_gaps, rng_gyro, rng_gnss = (
+        Generator(PCG64(s)) for s in SeedSequence(seed).spawn(5)
+    )
+    start = np.int64(start_tai_ns)
+    a_m = R_EARTH_M + altitude_m
+    model = OrbitalAttitudeModel(
+        a_m=a_m,
+        inc_rad=float(sun_synchronous_inclination_rad(a_m)),
+        raan_rad=raan_rad,
+        u0_rad=u0_rad,
+        pitch=_series(pitch_mean_rad, pitch_amplitude_rad, vibration_amplitude_rad[0], vibration_hz, rng_attitude),
+        yaw=_series(yaw_mean_rad, yaw_amplitude_rad, vibration_amplitude_rad[1], vibration_hz, rng_attitude),
+        roll=_series(roll_mean_rad, roll_amplitude_rad, vibration_amplitude_rad[2], vibration_hz, rng_attitude),
+    )
+
+    def seconds(t_ns: NDArray) -> NDArray:
+        return (t_ns - start).astype(np.float64) / NS_PER_S
+
+    # Star tracker: q_IS = q_IB o q_BS o exp(noise about the sensor axes), gaps removed.
+    q_BS = mounting_q_BS_003(alpha_rad)
+    st_nominal = time_grid_tai_ns(start, duration_s, st_period_s, st_time_offset_s)
+    keep = gap_mask(st_nominal.size, gap_fraction, n_st_gaps, rng_gaps)
+    st_time = st_nominal[keep]
+    st_state = model.evaluate(seconds(st_time))
+    q_IS_true = rotations.quat_canonical(rotations.quat_multiply(st_state.q_IB, q_BS))
+    noise_S = rng_st.standard_normal((st_time.size, 3)) * np.asarray(st_noise_std_rad)
+    q_IS = rotations.quat_canonical(rotations.quat_multiply(q_IS_true, rotations.rotvec_to_quat(noise_S)))
+    edges = np.flatnonzero(np.diff(keep.astype(np.int8)))  # index before each change keep <-> removed
+    gap_intervals = np.stack([st_nominal[edges[0::2]], st_nominal[edges[1::2] + 1]], axis=-1)
+
+    # Gyro: w_G = dcm_GB w_B + b(t) + noise.
+    q_BG_arr = rotations.quat_canonical(rotations.quat_normalize(np.asarray(q_BG, dtype=float)))
+    gyro_time = time_grid_tai_ns(start, duration_s, gyro_period_s)
+    t_gyro = seconds(gyro_time)
+    gyro_state = model.evaluate(t_gyro)
+    bias = np.asarray(gyro_bias_rad_s, dtype=float) + np.asarray(gyro_bias_drift_rad_s2, dtype=float) * t_gyro[:, None]
+    w_G_true = rotations.quat_rotate(rotations.quat_conjugate(q_BG_arr), gyro_state.w_B)
+    w_G = w_G_true + bias + rng_gyro.standard_normal((gyro_time.size, 3)) * gyro_noise_std_rad_s
+
+    # GNSS: ITRS state from the inertial truth, zero EOP, plus white noise.
+    eop = EarthOrientation()
+    gnss_time = time_grid_tai_ns(start, duration_s, gnss_period_s)
+    r_I, v_I = model.orbit(seconds(gnss_time))
+    r_E, v_E = gcrs_to_itrs_state(r_I, v_I, gnss_time, eop)
+    r_E_meas = r_E + rng_gnss.standard_normal(r_E.shape) * gnss_position_noise_std_m
+    v_E_meas = v_E + rng_gnss.standard_normal(v_E.shape) * gnss_velocity_noise_std_m_s
+
+    streams = {
+        "star_tracker": {
+            "time_tai_ns": st_time,
+            **{f"q{i}": q_IS[:, i].copy() for i in range(4)},
+            "sensor": np.full(st_time.size, ST_SENSOR, dtype=object),
+        },
+        "gyro": {
+            "time_tai_ns": gyro_time,
+            **{c: w_G[:, i].copy() for i, c in enumerate(("wx", "wy", "wz"))},
+            "sensor": np.full(gyro_time.size, "gyro", dtype=object),
+        },
+        "gnss": {
+            "time_tai_ns": gnss_time,
+            **{c: r_E_meas[:, i].copy() for i, c in enumerate(("x", "y", "z"))},
+            **{c: v_E_meas[:, i].copy() for i, c in enumerate(("vx", "vy", "vz"))},
+            "sensor": np.full(gnss_time.size, "gnss", dtype=object),
+        },
+    }
+    config = {
+        "star_trackers": {ST_SENSOR: {"q_BS": q_BS.tolist()}},
+        "gyro": {"q_BG": q_BG_arr.tolist()},
+    }
+    truth = Truth003(
+        model=model,
+        start_tai_ns=int(start),
+        q_BS=q_BS,
+        q_BG=q_BG_arr,
+        alpha_rad=alpha_rad,
+        mean_motion_rad_s=float(mean_motion_rad_s(a_m)),
+        gyro_time_tai_ns=gyro_time,
+        q_IB_gyro=gyro_state.q_IB,
+        w_B_gyro=gyro_state.w_B,
+        pitch_rad=gyro_state.pitch_rad,
+        yaw_rad=gyro_state.yaw_rad,
+        roll_rad=gyro_state.roll_rad,
+        gyro_bias_rad_s=bias,
+        gyro_bias0_rad_s=np.asarray(gyro_bias_rad_s, dtype=float),
+        gyro_bias_drift_rad_s2=np.asarray(gyro_bias_drift_rad_s2, dtype=float),
+        gyro_noise_std_rad_s=gyro_noise_std_rad_s,
+        st_time_tai_ns=st_time,
+        q_IB_st=st_state.q_IB,
+        w_B_st=st_state.w_B,
+        q_IS_st=q_IS_true,
+        st_noise_rotvec_S=noise_S,
+        st_noise_std_rad=np.asarray(st_noise_std_rad, dtype=float),
+        st_nominal_time_tai_ns=st_nominal,
+        st_removed_time_tai_ns=st_nominal[~keep],
+        st_gap_intervals_tai_ns=gap_intervals,
+        gnss_time_tai_ns=gnss_time,
+        r_I=r_I,
+        v_I=v_I,
+        r_E=r_E,
+        v_E=v_E,
+        gnss_position_noise_std_m=gnss_position_noise_std_m,
+        gnss_velocity_noise_std_m_s=gnss_velocity_noise_std_m_s,
+        eop=eop,
+    )
+    return Scenario003(streams=streams, config=config, truth=truth, parameters=parameters)

@@ -1,0 +1,401 @@
+"""Closed-loop truth simulator of paper 004: gravity-gradient + magnetic microsatellite with an on-board
+EKF and the energy or averaged-LQR magnetic controller.
+
+Pure and deterministic (same keyword arguments -> bit-identical output; randomness from
+``numpy.random.Generator(PCG64)`` seeded by ``SeedSequence(seed).spawn(4)``: magnetometer, sun sensor,
+GNSS, spare). No I/O.
+
+Model (defaults from 004):
+
+- orbit: circular two-body, 650 km, inclination 98 deg, inertial frame I = GCRS; the node is put so
+  that the orbit is dawn-dusk at the start (orbit normal opposite to the Sun), which makes the Sun
+  direction in the orbital frame close to 004's S_orb = (0, 1, 0) and the orbit eclipse-free near the
+  equinoxes; ``sun_model="paper"`` uses exactly S_orb = (0, 1, 0) instead of the ephemeris;
+- attitude dynamics 004 eq. (1)-(3) (processing.rigid_body), J = diag(51.44, 51.48, 0.76) kg m^2,
+  integrated by RK4 with ``substeps`` per control step T_s = 1 s; gravity gradient with n^2 = mu/r^3;
+  the field in O follows the orbit (IGRF-14 at the true position; linear within a step);
+- disturbance tau_d = A sin(w0 t) in B, A = (3e-6, -5e-6, 9.8e-7) N m (004; zeros disable it);
+- sensors at 1 Hz: magnetometer B_M = dcm_MB dcm_BO (B_O + dB_O) + n, n ~ N(0, sigma^2) per axis [nT],
+  dB_O = field_model_error (1, -1, 1) |B_O| (004's 2 % model error: field_model_error = 0.02); sun
+  sensor s_S = dcm_SB dcm_BO s_O turned by a random small rotation with sigma per tangent axis,
+  absent in the Earth's shadow (conical model, any penumbra) and during periodic outages of
+  ``sun_outage_s`` per orbit centred at argument of latitude ``sun_outage_center_u_deg`` (004: 2000 s
+  and 1000 s); GNSS ITRF position/velocity with white noise (zero EOP; processing.earth_rotation_interp);
+- on board: the EKF of 004 ("ekf"), the MEKF ("mekf") or the true state ("truth") feeds the energy law
+  (004 eq. 6, beta = 1e8, alpha = 1e6) or the averaged LQR (004 eq. 7, R = diag(100, 100, 0.1),
+  Q = (0.1 deg)^-2 I6, designed on the true field over the first orbit), or no controller ("none");
+  the dipole is held over each step (zero-order hold), optionally saturated. The on-board filter is
+  initialised by a two-vector (TRIAD) solution of the first measurements and w_BO = 0, and uses the
+  IGRF field at the true position as its model (with the measurement noise it is told).
+Angles: roll, pitch, yaw of processing.rigid_body (3-2-1 from O to B); 004 starts its transients at
+(-30, 10, -20) deg with w_OB = 0.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Literal
+
+import numpy as np
+from numpy.random import PCG64, Generator, SeedSequence
+from numpy.typing import NDArray
+
+from processing import rotations
+from processing.earth_rotation_interp import gcrs_to_itrs_mat_interp
+from processing.environment.eclipse import sunlit_fraction
+from processing.environment.igrf import igrf_field_E_nT
+from processing.environment.sun import sun_direction_I, sun_position_I_m
+from processing.frames import OMEGA_EARTH_RAD_S, EarthOrientation
+from processing.gyroless_ekf import FILTERS, FilterTuning, initial_covariance, triad_q_OB
+from processing.magnetic_control import (
+    ENERGY_ALPHA_004,
+    ENERGY_BETA_004,
+    LQR_Q_004,
+    LQR_R_004,
+    AveragedLQR,
+    design_averaged_lqr,
+)
+from processing.orbital_frames import dcm_IO_lvlh_004
+from processing.orbits import R_EARTH_M, circular_orbit_state, mean_motion_rad_s
+from processing.rigid_body import (
+    DISTURBANCE_004_N_M,
+    INERTIA_004_KG_M2,
+    RigidBody004,
+    dcm_BO_columns,
+    q_OB_from_roll_pitch_yaw_004,
+    roll_pitch_yaw_004,
+)
+
+__all__ = ["Scenario004", "Seed004ParameterError", "Truth004", "orbit_period_s", "simulate_seed004"]
+
+DEG = math.pi / 180.0
+NS_PER_S = 1_000_000_000
+Controller = Literal["energy", "lqr", "none"]
+Estimator = Literal["ekf", "mekf", "truth"]
+
+
+class Seed004ParameterError(ValueError):
+    """A simulator parameter outside its domain."""
+
+
+def orbit_period_s(altitude_m: float = 650e3) -> float:
+    """Period [s] of a circular two-body orbit at the given altitude above R_EARTH_M (650 km: 5863 s)."""
+    return float(2.0 * math.pi / mean_motion_rad_s(R_EARTH_M + altitude_m))
+
+
+@dataclass(frozen=True)
+class Truth004:
+    """Known truth of a seed-004 run, on the 1 Hz grid time_tai_ns (K,). SI units, angles rad.
+
+    q_OB, q_IB (K, 4); omega_BI_B, omega_BO_B (K, 3); roll/pitch/yaw_rad (K,); B_O_nT (K, 3) true
+    field in O; s_O (K, 3) Sun direction in O; sun_visible (K,) bool (sun-sensor sample produced);
+    sunlit (K,) visible fraction of the solar disc; mu_B_A_m2 (K, 3) dipole held over [t_k, t_k+1);
+    tau_d_B_N_m (K, 3) disturbance; q_OB_onboard (K, 4), omega_BO_onboard_B (K, 3) the on-board
+    estimate used by the controller; r_I, v_I, r_E, v_E (K, 3) orbit; w0_rad_s mean motion;
+    inclination_rad, raan_rad, u0_rad elements; lqr the controller design (or None).
+    """
+
+    time_tai_ns: NDArray
+    q_OB: NDArray
+    q_IB: NDArray
+    omega_BI_B: NDArray
+    omega_BO_B: NDArray
+    roll_rad: NDArray
+    pitch_rad: NDArray
+    yaw_rad: NDArray
+    B_O_nT: NDArray
+    s_O: NDArray
+    sun_visible: NDArray
+    sunlit: NDArray
+    mu_B_A_m2: NDArray
+    tau_d_B_N_m: NDArray
+    q_OB_onboard: NDArray
+    omega_BO_onboard_B: NDArray
+    r_I: NDArray
+    v_I: NDArray
+    r_E: NDArray
+    v_E: NDArray
+    w0_rad_s: float
+    inclination_rad: float
+    raan_rad: float
+    u0_rad: float
+    lqr: AveragedLQR | None
+
+
+@dataclass(frozen=True)
+class Scenario004:
+    """Simulated telemetry and truth: streams {magnetometer, sun_sensor, gnss, magnetorquer} -> columns
+    (time_tai_ns int64, sensor str, canonical value columns), config (DESIGN.md JSON shape), truth
+    (:class:`Truth004`), parameters (the keyword arguments used)."""
+
+    streams: dict[str, dict[str, NDArray]]
+    config: dict[str, Any]
+    truth: Truth004
+    parameters: dict[str, Any]
+
+
+def _rotvec(q: tuple[float, ...]) -> tuple[float, float, float]:
+    """Rotation vector (rad) of a unit quaternion (4 floats), angle in [0, pi]."""
+    q0, q1, q2, q3 = q
+    if q0 < 0.0:
+        q0, q1, q2, q3 = -q0, -q1, -q2, -q3
+    s = math.sqrt(q1 * q1 + q2 * q2 + q3 * q3)
+    k = 2.0 * math.atan2(s, q0) / s if s > 1e-12 else 2.0 / q0
+    return (k * q1, k * q2, k * q3)
+
+
+def _check(cond: bool, message: str) -> None:
+    if not cond:
+        raise Seed004ParameterError(message)
+
+
+def _unit(v: NDArray) -> NDArray:
+    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
+def _perturb_direction(s: NDArray, sigma_rad: float, rng: Generator) -> NDArray:
+    """Unit vectors s (N, 3) turned by a small random rotation with sigma per tangent axis."""
+    n = rng.standard_normal(s.shape) * sigma_rad
+    n -= np.sum(n * s, axis=-1, keepdims=True) * s
+    return _unit(s + n)
+
+
+def simulate_seed004(
+    *,
+    start_tai_ns: int,
+    duration_s: float = 2 * 5863.0,
+    seed: int = 0,
+    controller: Controller = "lqr",
+    estimator: Estimator = "ekf",
+    initial_angles_deg: tuple[float, float, float] = (-30.0, 10.0, -20.0),
+    initial_omega_BO_rad_s: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    disturbance_N_m: tuple[float, float, float] = DISTURBANCE_004_N_M,
+    sun_model: Literal["ephemeris", "paper"] = "ephemeris",
+    sun_outage_s: float = 0.0,
+    sun_outage_center_u_deg: float = 180.0,
+    field_model_error: float = 0.0,
+    magnetometer_noise_nT: float = 100.0,
+    sun_sensor_noise_deg: float = 0.5,
+    gnss_position_noise_m: float = 5.0,
+    gnss_velocity_noise_m_s: float = 0.01,
+    altitude_m: float = 650e3,
+    inclination_deg: float = 98.0,
+    raan_rad: float | None = None,
+    u0_rad: float = 0.0,
+    inertia_kg_m2: tuple[float, float, float] = INERTIA_004_KG_M2,
+    energy_beta: float = ENERGY_BETA_004,
+    energy_alpha: float = ENERGY_ALPHA_004,
+    lqr_q: float = LQR_Q_004,
+    lqr_r: tuple[float, float, float] = LQR_R_004,
+    max_dipole_A_m2: float | None = None,
+    onboard_tuning: FilterTuning | None = None,
+    q_BM: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0),
+    q_BS: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0),
+    step_s: float = 1.0,
+    substeps: int = 1,
+) -> Scenario004:
+    """Simulate the closed loop of 004 for ``duration_s`` at ``step_s`` (all arguments keyword-only).
+
+    start_tai_ns: int64 ns since 1970-01-01 TAI. Angles in the names' units; see the module docstring.
+    Returns :class:`Scenario004`.
+    """
+    parameters = {k: v for k, v in locals().items() if k != "parameters"}
+    _check(duration_s > 0 and step_s > 0, f"duration_s and step_s must be > 0, got {duration_s}, {step_s}")
+    _check(substeps >= 1, f"substeps must be >= 1, got {substeps}")
+    _check(controller in ("energy", "lqr", "none"), f"controller must be energy|lqr|none, got {controller!r}")
+    _check(estimator in ("ekf", "mekf", "truth"), f"estimator must be ekf|mekf|truth, got {estimator!r}")
+    _check(sun_model in ("ephemeris", "paper"), f"sun_model must be ephemeris|paper, got {sun_model!r}")
+    _check(magnetometer_noise_nT >= 0 and sun_sensor_noise_deg >= 0, "sensor noise must be >= 0")
+    _check(0.0 <= sun_outage_s < orbit_period_s(altitude_m), "sun_outage_s must be in [0, orbit period)")
+
+    tuning = FilterTuning() if onboard_tuning is None else onboard_tuning
+    rng_mag, rng_sun, rng_gnss, _ = (Generator(PCG64(s)) for s in SeedSequence(seed).spawn(4))
+    body = RigidBody004.from_inertia(inertia_kg_m2)
+    J = np.diag([body.Jx, body.Jy, body.Jz])
+    K = int(math.floor(duration_s / step_s + 1e-9)) + 1
+    start = np.int64(start_tai_ns)
+    t_s = np.arange(K) * step_s
+    time_ns = start + np.round(t_s * NS_PER_S).astype(np.int64)
+
+    # orbit and environment on the step grid (vectorised)
+    a_m = R_EARTH_M + altitude_m
+    w0 = float(mean_motion_rad_s(a_m))
+    inc = inclination_deg * DEG
+    s_I0 = sun_direction_I(start)
+    raan = float(math.atan2(-s_I0[0], s_I0[1])) % (2 * math.pi) if raan_rad is None else float(raan_rad)
+    r_I, v_I = circular_orbit_state(t_s, a_m, inc, raan, u0_rad)
+    dcm_IO = dcm_IO_lvlh_004(r_I, v_I)
+    eop = EarthOrientation()
+    dcm_EI = gcrs_to_itrs_mat_interp(time_ns, eop)
+    r_E = np.einsum("kij,kj->ki", dcm_EI, r_I)
+    v_E = np.einsum("kij,kj->ki", dcm_EI, v_I) - np.cross([0.0, 0.0, OMEGA_EARTH_RAD_S], r_E)
+    B_E = igrf_field_E_nT(r_E, time_ns)
+    B_O = np.einsum("kji,klj,kl->ki", dcm_IO, dcm_EI, B_E)  # dcm_OI dcm_IE B_E
+    if sun_model == "paper":
+        s_O = np.tile([0.0, 1.0, 0.0], (K, 1))
+        sunlit = np.ones(K)
+    else:
+        s_O = np.einsum("kji,kj->ki", dcm_IO, sun_direction_I(time_ns))
+        sunlit = sunlit_fraction(r_I, sun_position_I_m(time_ns))
+    u = (u0_rad + w0 * t_s) % (2 * math.pi)
+    du = (u - sun_outage_center_u_deg * DEG + math.pi) % (2 * math.pi) - math.pi
+    outage = np.abs(du) < 0.5 * w0 * sun_outage_s
+    sun_visible = (sunlit >= 1.0) & ~outage
+
+    # sensors' frames and noise (pre-drawn, so that noise does not depend on the controller)
+    q_BM_a = rotations.quat_canonical(rotations.quat_normalize(np.asarray(q_BM, dtype=float)))
+    q_BS_a = rotations.quat_canonical(rotations.quat_normalize(np.asarray(q_BS, dtype=float)))
+    dcm_MB = rotations.quat_to_dcm(rotations.quat_conjugate(q_BM_a))
+    dcm_SB = rotations.quat_to_dcm(rotations.quat_conjugate(q_BS_a))
+    mag_noise = rng_mag.standard_normal((K, 3)) * magnetometer_noise_nT
+    sun_rot_noise = rng_sun.standard_normal((K, 3)) * (sun_sensor_noise_deg * DEG)
+    B_O_meas = B_O + field_model_error * np.array([1.0, -1.0, 1.0]) * np.linalg.norm(B_O, axis=1, keepdims=True)
+    amp = np.asarray(disturbance_N_m, dtype=float)
+    _check(amp.shape == (3,), f"disturbance_N_m must have 3 components, got {disturbance_N_m!r}")
+
+    lqr = None
+    if controller == "lqr":
+        n_orbit = min(K, int(round(orbit_period_s(altitude_m) / step_s)))
+        if n_orbit < K:
+            B_design = B_O[:n_orbit]
+        else:
+            r1, v1 = circular_orbit_state(np.arange(n_orbit) * step_s, a_m, inc, raan, u0_rad)
+            t1 = start + np.round(np.arange(n_orbit) * step_s * NS_PER_S).astype(np.int64)
+            m1 = gcrs_to_itrs_mat_interp(t1, eop)
+            B_design = np.einsum("kji,klj,kl->ki", dcm_IO_lvlh_004(r1, v1), m1,
+                                 igrf_field_E_nT(np.einsum("kij,kj->ki", m1, r1), t1))
+        lqr = design_averaged_lqr(J, w0, B_design * 1e-9, step_s=step_s, Q=lqr_q, R=lqr_r)
+
+    # initial state
+    q = tuple(float(x) for x in q_OB_from_roll_pitch_yaw_004(*(np.asarray(initial_angles_deg) * DEG)))
+    c2 = dcm_BO_columns(q)[1]  # type: ignore[arg-type]
+    w = tuple(float(initial_omega_BO_rad_s[i]) - w0 * c2[i] for i in range(3))
+
+    q_hist, w_hist = np.empty((K, 4)), np.empty((K, 3))
+    mu_hist, tau_hist = np.zeros((K, 3)), np.zeros((K, 3))
+    q_est_hist, w_est_hist = np.empty((K, 4)), np.empty((K, 3))
+    b_M_all, s_S_all = np.empty((K, 3)), np.full((K, 3), np.nan)
+    sigma_s = max(sun_sensor_noise_deg * DEG, 1e-4)
+    # per-step sensor noise, drawn up front (the noise does not depend on the controller)
+    R_sun_noise = rotations.quat_to_dcm(rotations.rotvec_to_quat(sun_rot_noise))
+    B_O_T, B_O_meas_l = (B_O * 1e-9).tolist(), B_O_meas.tolist()
+    b_O_unit = _unit(B_O)
+    mag_noise_l, s_O_l = mag_noise.tolist(), s_O.tolist()
+    sun_vis_l = sun_visible.tolist()
+    ident_M = bool(np.allclose(q_BM_a, [1.0, 0.0, 0.0, 0.0]))
+    tau_all = amp[None, :] * np.sin(w0 * (t_s[:, None] + 0.5 * step_s / substeps))
+    tau_l = tau_all.tolist()
+    est = None
+    n2 = w0 * w0
+    h = step_s / substeps
+    K_gain = lqr.K if lqr is not None else None
+    prev_torque_B = np.zeros(3)
+
+    for k in range(K):
+        q_hist[k], w_hist[k] = q, w
+        c1, c2, c3 = dcm_BO_columns(q)  # type: ignore[arg-type]
+        # measurements at t_k: magnetometer (nT, frame M) and Sun (frame S)
+        bx, by, bz = B_O_meas_l[k]
+        b_B_true = np.array([bx * c1[0] + by * c2[0] + bz * c3[0], bx * c1[1] + by * c2[1] + bz * c3[1],
+                             bx * c1[2] + by * c2[2] + bz * c3[2]])
+        b_M = (b_B_true if ident_M else dcm_MB @ b_B_true) + mag_noise_l[k]
+        b_M_all[k] = b_M
+        B_B_meas_T = (b_M if ident_M else dcm_MB.T @ b_M) * 1e-9
+        B_norm = math.sqrt(float(B_B_meas_T @ B_B_meas_T))
+        s_B = None
+        if sun_vis_l[k]:
+            sx, sy, sz = s_O_l[k]
+            s_true = np.array([sx * c1[0] + sy * c2[0] + sz * c3[0], sx * c1[1] + sy * c2[1] + sz * c3[1],
+                               sx * c1[2] + sy * c2[2] + sz * c3[2]])
+            s_S = dcm_SB @ (R_sun_noise[k] @ s_true)
+            s_S_all[k] = s_S
+            s_B = dcm_SB.T @ s_S
+        # on-board estimate
+        if estimator == "truth":
+            q_est = q
+            w_bo = (w[0] + w0 * c2[0], w[1] + w0 * c2[1], w[2] + w0 * c2[2])
+        else:
+            b_B_unit = B_B_meas_T / B_norm
+            sigma_b = max(magnetometer_noise_nT, 1.0) * 1e-9 / B_norm
+            if est is None:
+                q_init = (triad_q_OB(b_O_unit[k], s_O[k], b_B_unit, s_B) if s_B is not None
+                          else np.array([1.0, 0.0, 0.0, 0.0]))
+                c2i = np.array(dcm_BO_columns(tuple(q_init))[1])  # type: ignore[arg-type]
+                P0 = initial_covariance(estimator, q_init, (10 if s_B is not None else 60) * DEG, 2e-3, 1e-5)
+                est = FILTERS[estimator](J, q_init, -w0 * c2i, P0, tuning)
+            else:
+                est.predict(step_s, w0, n2, prev_torque_B)
+            est.update(b_B_unit, b_O_unit[k], sigma_b, s_B, s_O[k] if s_B is not None else None, sigma_s)
+            q_est = est.q
+            w_bo = est.omega_BO_B(w0)
+        q_est_hist[k], w_est_hist[k] = q_est, w_bo
+        # controller (dipole held over the step), B in tesla
+        Bx, By, Bz = float(B_B_meas_T[0]), float(B_B_meas_T[1]), float(B_B_meas_T[2])
+        if controller == "energy":
+            sgn = 1.0 if q_est[0] >= 0.0 else -1.0
+            vx = energy_beta * w_bo[0] + energy_alpha * sgn * q_est[1]
+            vy = energy_beta * w_bo[1] + energy_alpha * sgn * q_est[2]
+            vz = energy_beta * w_bo[2] + energy_alpha * sgn * q_est[3]
+            mu = (vy * Bz - vz * By, vz * Bx - vx * Bz, vx * By - vy * Bx)
+        elif controller == "lqr":
+            assert K_gain is not None
+            th = _rotvec(q_est)
+            u_t = -K_gain @ np.array([th[0], w_bo[0], th[1], w_bo[1], th[2], w_bo[2]])
+            ux, uy, uz = float(u_t[0]) / B_norm, float(u_t[1]) / B_norm, float(u_t[2]) / B_norm
+            mu = (uy * Bz - uz * By, uz * Bx - ux * Bz, ux * By - uy * Bx)
+        else:
+            mu = (0.0, 0.0, 0.0)
+        if max_dipole_A_m2 is not None:
+            peak = max(abs(mu[0]), abs(mu[1]), abs(mu[2]))
+            if peak > max_dipole_A_m2:
+                mu = tuple(m * (max_dipole_A_m2 / peak) for m in mu)  # type: ignore[assignment]
+        mu_hist[k] = mu
+        prev_torque_B = np.array([mu[1] * Bz - mu[2] * By, mu[2] * Bx - mu[0] * Bz, mu[0] * By - mu[1] * Bx])
+        # truth propagation over [t_k, t_k+1)
+        if k == K - 1:
+            break
+        B0, B1 = B_O_T[k], B_O_T[k + 1]
+        for j in range(substeps):
+            tau = tau_l[k] if j == 0 else (amp * math.sin(w0 * (t_s[k] + (j + 0.5) * h))).tolist()
+            fa, fb = j / substeps, (j + 1) / substeps
+            Ba = ((1 - fa) * B0[0] + fa * B1[0], (1 - fa) * B0[1] + fa * B1[1], (1 - fa) * B0[2] + fa * B1[2])
+            Bb = ((1 - fb) * B0[0] + fb * B1[0], (1 - fb) * B0[1] + fb * B1[1], (1 - fb) * B0[2] + fb * B1[2])
+            q, w = body.rk4_step(q, w, h, w0, n2, tau_B=tuple(tau), mu_B=mu, B_O0=Ba, B_O1=Bb)  # type: ignore
+    tau_hist[:] = tau_all
+    # truth series
+    q_OB = rotations.quat_canonical(q_hist)
+    q_IO = rotations.dcm_to_quat(dcm_IO)
+    q_IB = rotations.quat_canonical(rotations.quat_multiply(q_IO, q_OB))
+    c2_all = rotations.quat_rotate(rotations.quat_conjugate(q_OB), np.array([0.0, 1.0, 0.0]))
+    w_BO = w_hist + w0 * c2_all
+    roll, pitch, yaw = roll_pitch_yaw_004(q_OB)
+
+    gnss_r = r_E + rng_gnss.standard_normal(r_E.shape) * gnss_position_noise_m
+    gnss_v = v_E + rng_gnss.standard_normal(v_E.shape) * gnss_velocity_noise_m_s
+    vis = np.flatnonzero(sun_visible)
+    streams = {
+        "magnetometer": {"time_tai_ns": time_ns, **{c: b_M_all[:, i].copy() for i, c in enumerate(("bx", "by", "bz"))},
+                         "sensor": np.full(K, "magnetometer", dtype=object)},
+        "sun_sensor": {"time_tai_ns": time_ns[vis],
+                       **{c: s_S_all[vis, i].copy() for i, c in enumerate(("sx", "sy", "sz"))},
+                       "sensor": np.full(vis.size, "sun_sensor", dtype=object)},
+        "gnss": {"time_tai_ns": time_ns, **{c: gnss_r[:, i].copy() for i, c in enumerate(("x", "y", "z"))},
+                 **{c: gnss_v[:, i].copy() for i, c in enumerate(("vx", "vy", "vz"))},
+                 "sensor": np.full(K, "gnss", dtype=object)},
+        "magnetorquer": {"time_tai_ns": time_ns, **{c: mu_hist[:, i].copy() for i, c in enumerate(("mx", "my", "mz"))},
+                         "sensor": np.full(K, "magnetorquer", dtype=object)},
+    }
+    config = {
+        "magnetometer": {"q_BM": q_BM_a.tolist()},
+        "sun_sensor": {"q_BS": q_BS_a.tolist()},
+        "inertia_kg_m2": J.tolist(),
+    }
+    truth = Truth004(
+        time_tai_ns=time_ns, q_OB=q_OB, q_IB=q_IB, omega_BI_B=w_hist, omega_BO_B=w_BO, roll_rad=roll,
+        pitch_rad=pitch, yaw_rad=yaw, B_O_nT=B_O, s_O=s_O, sun_visible=sun_visible, sunlit=sunlit,
+        mu_B_A_m2=mu_hist, tau_d_B_N_m=tau_hist, q_OB_onboard=rotations.quat_canonical(q_est_hist),
+        omega_BO_onboard_B=w_est_hist, r_I=r_I, v_I=v_I, r_E=r_E, v_E=v_E, w0_rad_s=w0, inclination_rad=inc,
+        raan_rad=raan, u0_rad=u0_rad, lqr=lqr,
+    )
+    return Scenario004(streams=streams, config=config, truth=truth, parameters=parameters)
