@@ -1,0 +1,497 @@
+"""Job ``gyro_bias_fit``: gyro offsets and attitude by Gauss-Newton with variational equations (003 §2).
+
+Wraps :func:`processing.gyro_bias_fit.fit_gyro_bias`: loads the star-tracker and gyro samples of the
+window, works in the reference star tracker's frame (003 §2.4), fits the whole segment and its
+sub-intervals, and reports the offsets in the sensor frame (the paper's Delta, arcsec/s) and in the body
+frame as a gyro bias (w_meas = w_true + b, rad/s), each with the honest sigma (gyro noise included) and
+the paper's sigma_w² C^-1 figure (``*_sigma_paper``). Figures follow 003 figs. 13-16.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Any, Literal
+
+import numpy as np
+from matplotlib.figure import Figure
+from numpy.typing import NDArray
+from pydantic import BaseModel, ConfigDict, Field, PositiveFloat
+
+from app.jobs.registry import JobType
+from processing import rotations
+from processing.gyro_bias_fit import (
+    ARCSEC_RAD,
+    GyroBiasFit,
+    GyroBiasFitError,
+    estimate_gyro_arw,
+    fit_gyro_bias,
+    fit_subintervals,
+    subinterval_edges,
+)
+from processing.sine_series import SineSeriesError, fit_sine_series, select_harmonics
+from processing.tasks import Progress, TaskError, TaskInputs, TaskResult
+from processing.timescales import tai_ns_to_iso
+
+NS_PER_S = 1_000_000_000
+DEG_RAD = np.pi / 180.0
+RATES_TABLE_MAX_ROWS = 20_000
+"""The "rates" table (figure 13a) keeps every k-th gyro sample so that it has at most this many rows."""
+MAX_SMOOTHING_HARMONICS = 400
+"""Upper end of the harmonic-count search when use_smoothed_rates and smoothing_harmonics is None."""
+
+
+class Params(BaseModel):
+    """Parameters of ``gyro_bias_fit`` (003 §2.1-2.4)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    sensor: str | list[str] | None = Field(
+        None,
+        description="Star tracker(s). One name: that tracker; a list: fitted jointly, the first is the "
+        "reference frame; None: every configured tracker with data, jointly.",
+    )
+    scheme: Literal[1, 2] = Field(2, description="003 §2.3 difference scheme: 1 trapezoid, 2 midpoint (|q| = 1).")
+    use_smoothed_rates: bool = Field(
+        False,
+        description="Integrate the sine-series approximation omega_ap of the rates (003 §2.1), not the samples.",
+    )
+    smoothing_harmonics: int | None = Field(
+        None, ge=0, description="Harmonics M of omega_ap; None: chosen by generalised cross-validation."
+    )
+    weights: tuple[PositiveFloat, PositiveFloat, PositiveFloat] = Field(
+        (1.0, 1.0, 0.2), description="Weights w1, w2, w3 of 003 eq. 6 (sensor axes; x3 = boresight)."
+    )
+    estimate_mounting: bool = Field(False, description="Also estimate the gyro-to-star-tracker mounting (3 angles).")
+    mounting_sigma_max_arcsec: PositiveFloat = Field(
+        60.0, description="The mounting is reported only when every component's sigma is below this."
+    )
+    subintervals: list[Annotated[int, Field(ge=1, le=64)]] = Field(
+        [2, 4], description="Each n cuts the segment into n equal parts fitted separately (003 §2.4: 2, 4)."
+    )
+    sliding_window_s: PositiveFloat | None = Field(None, description="Also fit sliding windows of this length.")
+    sliding_step_s: PositiveFloat | None = Field(None, description="Step of the sliding windows (default: half).")
+    gyro_arw_rad_sqrt_s: float | tuple[float, float, float] | None = Field(
+        None, description="Gyro angle random walk per gyro axis, rad/sqrt(s); None: estimated from the rates."
+    )
+    max_gyro_gap_s: PositiveFloat = Field(5.0, description="Longest gyro gap bridged by interpolation.")
+    max_iterations: int = Field(20, ge=1, le=200)
+
+
+# ---------------------------------------------------------------------------------------------------
+
+
+def _floats(x: Any) -> list[float]:
+    return [float(v) for v in np.asarray(x, dtype=np.float64).reshape(-1)]
+
+
+def _iso(t_ns: int) -> str:
+    return str(tai_ns_to_iso(np.array([t_ns], dtype=np.int64))[0])
+
+
+def _q(config_entry: Any, key: str, what: str) -> NDArray[np.float64]:
+    try:
+        q = np.asarray(config_entry[key], dtype=np.float64)
+    except (KeyError, TypeError, ValueError):
+        raise TaskError(f"spacecraft configuration has no valid {what}.{key}") from None
+    if q.shape != (4,) or not np.all(np.isfinite(q)) or np.linalg.norm(q) < 1e-12:
+        raise TaskError(f"{what}.{key} must be 4 finite numbers (scalar first), got {config_entry[key]!r}")
+    return rotations.quat_normalize(q)
+
+
+def _choose_sensors(inputs: TaskInputs, params: Params) -> tuple[list[str], dict[str, NDArray[np.float64]]]:
+    configured = dict(inputs.config.get("star_trackers") or {})
+    st = inputs.stream("star_tracker")
+    present = sorted(set(np.asarray(st["sensor"]).tolist()))
+    if params.sensor is None:
+        names = [name for name in configured if name in present]
+        if not names:
+            raise TaskError(
+                f"no configured star tracker has data in the window (configured: {sorted(configured)}, "
+                f"present: {present})"
+            )
+    else:
+        names = [params.sensor] if isinstance(params.sensor, str) else list(params.sensor)
+        if not names or len(set(names)) != len(names):
+            raise TaskError(f"sensor must name distinct star trackers, got {params.sensor!r}")
+        for name in names:
+            if name not in configured:
+                raise TaskError(f"star tracker {name!r} is not in the spacecraft configuration ({sorted(configured)})")
+            if name not in present:
+                raise TaskError(f"no star_tracker samples of sensor {name!r} in the window (present: {present})")
+    return names, {name: _q(configured[name], "q_BS", f"star_trackers.{name}") for name in names}
+
+
+def _gyro(inputs: TaskInputs, params: Params, notes: list[str]) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+    g = inputs.stream("gyro")
+    names = sorted(set(np.asarray(g["sensor"]).tolist())) if "sensor" in g else []
+    if len(names) > 1:
+        raise TaskError(f"the window holds several gyro sensors ({names}); one gyro triad is expected")
+    t = np.asarray(g["time_tai_ns"], dtype=np.int64)
+    w = np.column_stack([np.asarray(g[c], dtype=np.float64) for c in ("wx", "wy", "wz")])
+    order = np.argsort(t, kind="stable")
+    t, w = t[order], w[order]
+    if t.size < 8:
+        raise TaskError(f"need at least 8 gyro samples, got {t.size}")
+    dt = np.diff(t)
+    if np.any(dt <= 0):
+        raise TaskError(f"gyro times must be distinct; {int(np.sum(dt <= 0))} repeated time stamps")
+    if not np.all(np.isfinite(w)):
+        raise TaskError("gyro rates must be finite")
+    step = float(np.median(dt)) / NS_PER_S
+    gaps = dt / NS_PER_S > 2.5 * step
+    if np.any(gaps):
+        longest = float(dt.max()) / NS_PER_S
+        if longest > params.max_gyro_gap_s:
+            raise TaskError(
+                f"gyro gap of {longest:.3g} s exceeds max_gyro_gap_s = {params.max_gyro_gap_s} s; "
+                "split the window at the gap"
+            )
+        notes.append(f"{int(np.sum(gaps))} gyro gaps (longest {longest:.3g} s) bridged by linear interpolation")
+    return t, w
+
+
+def _bias_body(fit: GyroBiasFit, q_BG: NDArray[np.float64], cov: NDArray[np.float64]) -> tuple[Any, Any]:
+    """Body-frame bias b_B = -R(q_BR) Delta (w_meas = w_true + b) and its sigma from cov (3x3 of Delta)."""
+    r_br = rotations.quat_to_dcm(rotations.quat_multiply(q_BG, rotations.quat_conjugate(fit.q_RG)))
+    b = -r_br @ fit.delta_R_rad_s
+    return b, np.sqrt(np.diag(r_br @ cov @ r_br.T))
+
+
+def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
+    """Fit gyro offsets and the initial attitude to star-tracker quaternions (003 §2.1-2.4)."""
+    notes: list[str] = []
+    progress(0.0, "loading")
+    names, q_BS = _choose_sensors(inputs, params)
+    q_BG = _q(inputs.config["gyro"], "q_BG", "gyro") if "gyro" in inputs.config else np.array([1.0, 0.0, 0.0, 0.0])
+    t_g_ns, w_G = _gyro(inputs, params, notes)
+    ref = names[0]
+    q_SB_ref = rotations.quat_conjugate(q_BS[ref])
+
+    st = inputs.stream("star_tracker")
+    sensor_col = np.asarray(st["sensor"])
+    keep = np.isin(sensor_col, names) & (st["time_tai_ns"] >= t_g_ns[0]) & (st["time_tai_ns"] <= t_g_ns[-1])
+    outside = int(np.count_nonzero(np.isin(sensor_col, names))) - int(np.count_nonzero(keep))
+    if outside:
+        notes.append(f"{outside} star-tracker samples outside the gyro time span were not used")
+    t_st_ns = np.asarray(st["time_tai_ns"], dtype=np.int64)[keep]
+    q_IS = np.column_stack([np.asarray(st[f"q{i}"], dtype=np.float64)[keep] for i in range(4)])
+    sensor_of = sensor_col[keep]
+    sensor_index = np.zeros(sensor_of.size, dtype=np.int64)
+    for j, name in enumerate(names):
+        sensor_index[sensor_of == name] = j
+    if t_st_ns.size < 4:
+        raise TaskError(f"need at least 4 star-tracker samples within the gyro span, got {t_st_ns.size}")
+    q_RS = np.stack([rotations.quat_multiply(q_SB_ref, q_BS[s]) for s in names])[sensor_index]
+    q_RG = rotations.quat_multiply(q_SB_ref, q_BG)
+
+    epoch = int(t_g_ns[0])
+    t_g = (t_g_ns - epoch).astype(np.float64) / NS_PER_S
+    t_st = (t_st_ns - epoch).astype(np.float64) / NS_PER_S
+
+    if params.gyro_arw_rad_sqrt_s is None:
+        arw = estimate_gyro_arw(t_g, w_G)
+        arw_source = "estimated from the second differences of the gyro rates"
+    else:
+        arw = np.broadcast_to(np.asarray(params.gyro_arw_rad_sqrt_s, dtype=np.float64), (3,)).copy()
+        if np.any(arw < 0):
+            raise TaskError(f"gyro_arw_rad_sqrt_s must be >= 0, got {params.gyro_arw_rad_sqrt_s!r}")
+        arw_source = "given"
+
+    w_fit = w_G
+    harmonics = None
+    if params.use_smoothed_rates:
+        progress(0.05, "smoothing gyro rates (omega_ap)")
+        try:
+            if params.smoothing_harmonics is None:
+                harmonics, _ = select_harmonics(t_g, w_G, MAX_SMOOTHING_HARMONICS)
+            else:
+                harmonics = params.smoothing_harmonics
+            w_fit = fit_sine_series(t_g, w_G, harmonics).evaluate(t_g)
+        except SineSeriesError as exc:
+            raise TaskError(f"smoothing the gyro rates failed: {exc}") from exc
+        notes.append(
+            f"rates smoothed by a sine series with M = {harmonics} harmonics (003 §2.1 omega_ap); the honest "
+            "covariance treats the remaining low-frequency gyro noise as a random walk (approximate)"
+        )
+
+    common = {
+        "q_RG": q_RG,
+        "weights": params.weights,
+        "scheme": params.scheme,
+        "gyro_arw_rad_sqrt_s": arw,
+        "max_iterations": params.max_iterations,
+    }
+    progress(0.1, "fitting the whole segment")
+    try:
+        fit = fit_gyro_bias(
+            t_g, w_fit, t_st, q_IS, q_RS=q_RS, sensor_index=sensor_index,
+            estimate_mounting=params.estimate_mounting,
+            mounting_sigma_max_rad=params.mounting_sigma_max_arcsec * ARCSEC_RAD,
+            **common,  # type: ignore[arg-type]
+        )
+    except GyroBiasFitError as exc:
+        raise TaskError(str(exc)) from exc
+    if not fit.converged:
+        notes.append(f"Gauss-Newton {fit.status}")
+
+    progress(0.5, "sub-intervals")
+    try:
+        edges = subinterval_edges(
+            float(t_st.min()), float(t_st.max()), splits=params.subintervals,
+            window_s=params.sliding_window_s, step_s=params.sliding_step_s,
+        )
+        sub_common = {**common, "q_RG": fit.q_RG}
+        subs = fit_subintervals(
+            t_g, w_fit, t_st, q_IS, edges, q_RS=q_RS, sensor_index=sensor_index,
+            **sub_common,  # type: ignore[arg-type]
+        )
+    except GyroBiasFitError as exc:
+        raise TaskError(f"sub-interval fits: {exc}") from exc
+    kinds = [("split", n, i) for n in params.subintervals for i in range(int(n))]
+    kinds += [("window", 0, i) for i in range(edges.shape[0] - len(kinds))]
+    skipped = sum(s is None for s in subs)
+    if skipped:
+        notes.append(f"{skipped} sub-intervals with fewer than 10 star-tracker samples were skipped")
+
+    progress(0.9, "report")
+    summary, tables = _report(
+        fit, subs, edges, kinds, names, q_BG, epoch, t_g_ns, w_G, w_fit if params.use_smoothed_rates else None,
+        t_st_ns, sensor_of, arw, arw_source, params, harmonics, t_g,
+    )
+    progress(1.0, "done")
+    return TaskResult(summary=summary, tables=tables, notes=notes)
+
+
+def _report(
+    fit: GyroBiasFit,
+    subs: list[GyroBiasFit | None],
+    edges: NDArray[np.float64],
+    kinds: list[tuple[str, int, int]],
+    names: list[str],
+    q_BG: NDArray[np.float64],
+    epoch: int,
+    t_g_ns: NDArray[np.int64],
+    w_G: NDArray[np.float64],
+    w_ap: NDArray[np.float64] | None,
+    t_st_ns: NDArray[np.int64],
+    sensor_of: NDArray[Any],
+    arw: NDArray[np.float64],
+    arw_source: str,
+    params: Params,
+    harmonics: int | None,
+    t_g: NDArray[np.float64],
+) -> tuple[dict[str, Any], dict[str, dict[str, NDArray[Any]]]]:
+    ref = names[0]
+    b, b_sig = _bias_body(fit, q_BG, fit.covariance[3:6, 3:6])
+    _, b_sig_paper = _bias_body(fit, q_BG, fit.covariance_paper[3:6, 3:6])
+    q_BR = rotations.quat_multiply(q_BG, rotations.quat_conjugate(fit.q_RG))
+    q_IB0 = rotations.quat_canonical(rotations.quat_multiply(fit.q_IR0, rotations.quat_conjugate(q_BR)))
+    t0_ns = epoch + int(round(fit.t0_s * NS_PER_S))
+    arcsec = 1.0 / ARCSEC_RAD
+
+    sub_rows = []
+    for (a, e), fit_k, (kind, parts, index) in zip(edges, subs, kinds, strict=True):
+        start_ns, end_ns = epoch + int(round(a * NS_PER_S)), epoch + int(round(e * NS_PER_S))
+        row: dict[str, Any] = {
+            "kind": kind, "parts": parts, "index": index,
+            "start": _iso(start_ns), "end": _iso(end_ns), "start_tai_ns": start_ns, "end_tai_ns": end_ns,
+        }
+        if fit_k is None:
+            row.update(n_samples=0, gyro_bias_rad_s=None, gyro_bias_sigma_rad_s=None)
+        else:
+            bk, bk_sig = _bias_body(fit_k, q_BG, fit_k.covariance[3:6, 3:6])
+            _, bk_sig_p = _bias_body(fit_k, q_BG, fit_k.covariance_paper[3:6, 3:6])
+            row.update(
+                n_samples=int(fit_k.n_samples.sum()),
+                gyro_bias_rad_s=_floats(bk),
+                gyro_bias_sigma_rad_s=_floats(bk_sig),
+                gyro_bias_sigma_paper_rad_s=_floats(bk_sig_p),
+                delta_sensor_arcsec_s=_floats(fit_k.delta_R_rad_s * arcsec),
+                delta_sensor_sigma_arcsec_s=_floats(fit_k.sigma[3:6] * arcsec),
+                delta_sensor_sigma_paper_arcsec_s=_floats(fit_k.sigma_paper[3:6] * arcsec),
+                residual_rms_arcsec=_floats(fit_k.residual_rms_rad[0] * arcsec),
+                converged=bool(fit_k.converged),
+            )
+        sub_rows.append(row)
+
+    mounting: dict[str, Any] | None = None
+    if fit.mounting is not None:
+        m = fit.mounting
+        mounting = {
+            "determinable": bool(m.determinable),
+            "reason": m.reason,
+            "misalignment_sensor_rad": None if m.rotvec_R_rad is None else _floats(m.rotvec_R_rad),
+            "misalignment_sigma_sensor_rad": _floats(m.sigma_rad),
+            "misalignment_sigma_paper_sensor_rad": _floats(m.sigma_paper_rad),
+            "q_BS": None if m.rotvec_R_rad is None else _floats(rotations.quat_canonical(q_BR)),
+            "condition_number": float(m.condition_number),
+            "max_abs_correlation": float(m.max_abs_correlation),
+            "correlation": [_floats(r) for r in m.correlation],
+        }
+
+    sensors = {
+        name: {
+            "n_samples": int(fit.n_samples[j]),
+            "residual_rms_arcsec": _floats(fit.residual_rms_rad[j] * arcsec),
+            "residual_rms_gyro_arcsec": _floats(fit.residual_rms_gyro_rad[j] * arcsec),
+            "star_tracker_sigma_arcsec": _floats(fit.star_tracker_sigma_rad[j] * arcsec),
+        }
+        for j, name in enumerate(names)
+    }
+    summary: dict[str, Any] = {
+        "gyro_bias_rad_s": _floats(b),
+        "gyro_bias_sigma_rad_s": _floats(b_sig),
+        "gyro_bias_sigma_paper_rad_s": _floats(b_sig_paper),
+        "delta_sensor_arcsec_s": _floats(fit.delta_R_rad_s * arcsec),
+        "delta_sensor_sigma_arcsec_s": _floats(fit.sigma[3:6] * arcsec),
+        "delta_sensor_sigma_paper_arcsec_s": _floats(fit.sigma_paper[3:6] * arcsec),
+        "delta_body_arcsec_s": _floats(-b * arcsec),
+        "delta_body_sigma_arcsec_s": _floats(b_sig * arcsec),
+        "initial_mrp": _floats(fit.initial_mrp),
+        "initial_mrp_sigma": _floats(fit.sigma[:3]),
+        "initial_mrp_sigma_paper": _floats(fit.sigma_paper[:3]),
+        "initial_time": _iso(t0_ns),
+        "initial_time_tai_ns": t0_ns,
+        "initial_q_IS": _floats(fit.q_IR0),
+        "initial_q_IB": _floats(q_IB0),
+        "sigma_unit_weight": float(fit.sigma_unit_weight),
+        "residual_rms_arcsec": _floats(fit.residual_rms_rad[0] * arcsec),
+        "residual_rms_gyro_arcsec": _floats(fit.residual_rms_gyro_rad[0] * arcsec),
+        "star_tracker_sigma_arcsec": _floats(fit.star_tracker_sigma_rad[0] * arcsec),
+        "iterations": int(fit.iterations),
+        "converged": bool(fit.converged),
+        "status": fit.status,
+        "scheme": int(params.scheme),
+        "use_smoothed_rates": bool(params.use_smoothed_rates),
+        "smoothing_harmonics": harmonics,
+        "weights": _floats(params.weights),
+        "gyro_arw_rad_sqrt_s": _floats(arw),
+        "gyro_arw_source": arw_source,
+        "reference_sensor": ref,
+        "sensors": sensors,
+        "n_star_tracker_samples": int(fit.n_samples.sum()),
+        "n_gyro_samples": int(t_g_ns.size),
+        "parameter_names": list(fit.parameter_names),
+        "covariance": [_floats(r) for r in fit.covariance],
+        "covariance_paper": [_floats(r) for r in fit.covariance_paper],
+        "condition_number": float(fit.condition_number),
+        "mounting": mounting,
+        "subintervals": sub_rows,
+    }
+
+    residuals = {
+        "time_tai_ns": t_st_ns,
+        "sensor": np.asarray(sensor_of, dtype=object),
+        **{f"e{i + 1}_arcsec": fit.residuals_rad[:, i] * arcsec for i in range(3)},
+    }
+    stride = max(1, -(-t_g_ns.size // RATES_TABLE_MAX_ROWS))
+    r_bg = rotations.quat_to_dcm(q_BG)
+    w_B = (w_G[::stride] @ r_bg.T - b) / DEG_RAD
+    rates: dict[str, NDArray[Any]] = {"time_tai_ns": t_g_ns[::stride]}
+    rates.update({f"w{i + 1}_B_deg_s": w_B[:, i] for i in range(3)})
+    if w_ap is not None:
+        w_ap_B = (w_ap[::stride] @ r_bg.T - b) / DEG_RAD
+        rates.update({f"w{i + 1}_B_ap_deg_s": w_ap_B[:, i] for i in range(3)})
+    sub_table: dict[str, NDArray[Any]] = {
+        "kind": np.array([r["kind"] for r in sub_rows], dtype=object),
+        "parts": np.array([r["parts"] for r in sub_rows], dtype=np.int64),
+        "index": np.array([r["index"] for r in sub_rows], dtype=np.int64),
+        "start_tai_ns": np.array([r["start_tai_ns"] for r in sub_rows], dtype=np.int64),
+        "end_tai_ns": np.array([r["end_tai_ns"] for r in sub_rows], dtype=np.int64),
+        "n_samples": np.array([r["n_samples"] for r in sub_rows], dtype=np.int64),
+    }
+    for key, col in (
+        ("delta_sensor_arcsec_s", "delta{}_sensor_arcsec_s"),
+        ("delta_sensor_sigma_arcsec_s", "delta{}_sensor_sigma_arcsec_s"),
+        ("gyro_bias_rad_s", "gyro_bias{}_rad_s"),
+        ("gyro_bias_sigma_rad_s", "gyro_bias{}_sigma_rad_s"),
+        ("residual_rms_arcsec", "residual_rms{}_arcsec"),
+    ):
+        vals = np.array([r.get(key) or [np.nan] * 3 for r in sub_rows], dtype=np.float64).reshape(-1, 3)
+        sub_table.update({col.format(i + 1): vals[:, i] for i in range(3)})
+    return summary, {"residuals": residuals, "rates": rates, "subintervals": sub_table}
+
+
+# ---------------------------------------------------------------------------------------------------
+# Figures (003 figs. 13-16).
+
+
+def figures(result: TaskResult, params: Params) -> dict[str, Figure]:
+    """Rates with their approximation (fig. 13a), residual rotations per sensor axis (figs. 13b-c, 14),
+    offsets per sub-interval (the numbers of figs. 15-16)."""
+    figs: dict[str, Figure] = {}
+    summary = result.summary
+    res = result.tables["residuals"]
+    t_ref = int(np.min(res["time_tai_ns"]))
+
+    def seconds(t_ns: NDArray[Any]) -> NDArray[np.float64]:
+        return (np.asarray(t_ns, dtype=np.int64) - t_ref).astype(np.float64) / NS_PER_S
+
+    start = _iso(t_ref)
+    rates = result.tables["rates"]
+    fig = Figure(figsize=(8, 7), layout="constrained")
+    axes = fig.subplots(3, 1, sharex=True)
+    for i, ax in enumerate(axes):
+        ax.plot(seconds(rates["time_tai_ns"]), rates[f"w{i + 1}_B_deg_s"], lw=0.4, color="0.6", label="gyro - bias")
+        if f"w{i + 1}_B_ap_deg_s" in rates:
+            ax.plot(seconds(rates["time_tai_ns"]), rates[f"w{i + 1}_B_ap_deg_s"], lw=1.2, color="C0", label="omega_ap")
+        ax.set_ylabel(f"w{i + 1}, deg/s")
+    axes[0].legend(loc="upper right", fontsize="small")
+    axes[-1].set_xlabel(f"t, s from {start}")
+    fig.suptitle("Body rates (003 fig. 13a), body axes y1 y2 y3")
+    figs["rates"] = fig
+
+    fig = Figure(figsize=(8, 7), layout="constrained")
+    axes = fig.subplots(3, 1, sharex=True)
+    ref = summary["reference_sensor"]
+    sel = np.asarray(res["sensor"]) == ref
+    rms = summary["residual_rms_arcsec"]
+    for i, ax in enumerate(axes):
+        ax.plot(seconds(res["time_tai_ns"][sel]), res[f"e{i + 1}_arcsec"][sel], lw=0.8, marker=".", ms=2)
+        for s in (-1, 1):
+            ax.axhline(s * rms[i], color="C3", lw=0.8)
+        ax.set_ylabel(f"e{i + 1}, arcsec")
+        ax.set_title(f"rms {rms[i]:.2f}\" (gyro noise part {summary['residual_rms_gyro_arcsec'][i]:.2f}\")",
+                     fontsize="small", loc="right")
+    axes[-1].set_xlabel(f"t, s from {start}")
+    fig.suptitle(f"Residual rotations, {ref} axes x1 x2 x3, scheme {summary['scheme']} (003 figs. 13b-c)")
+    figs["residuals"] = fig
+
+    sub = result.tables["subintervals"]
+    fig = Figure(figsize=(8, 7), layout="constrained")
+    axes = fig.subplots(3, 1, sharex=True)
+    a, e = seconds(sub["start_tai_ns"]), seconds(sub["end_tai_ns"])
+    t_end = float(seconds(res["time_tai_ns"]).max())
+    for i, ax in enumerate(axes):
+        d = summary["delta_sensor_arcsec_s"][i]
+        s = summary["delta_sensor_sigma_arcsec_s"][i]
+        ax.axhspan(d - 3 * s, d + 3 * s, color="0.85", label="whole segment ±3σ")
+        ax.hlines(d, 0.0, t_end, color="k", lw=1.0)
+        v, sv = sub[f"delta{i + 1}_sensor_arcsec_s"], sub[f"delta{i + 1}_sensor_sigma_arcsec_s"]
+        ok = np.isfinite(v)
+        ax.hlines(v[ok], a[ok], e[ok], color="C0", lw=2.0)
+        ax.errorbar(0.5 * (a[ok] + e[ok]), v[ok], yerr=3 * sv[ok], fmt="none", ecolor="C0", capsize=3,
+                    label="sub-interval ±3σ")
+        ax.set_ylabel(f"Δ{i + 1}, arcsec/s")
+    axes[0].legend(loc="upper right", fontsize="small")
+    axes[-1].set_xlabel(f"t, s from {start}")
+    fig.suptitle(f"Gyro offsets Δ per sub-interval, {ref} axes (003 §2.4, figs. 15-16)")
+    figs["subintervals"] = fig
+    return figs
+
+
+JOB = JobType(
+    name="gyro_bias_fit",
+    title="Gyro offsets and attitude from star tracker + gyro (Gauss-Newton)",
+    paper="003 §2",
+    params=Params,
+    run=run,
+    streams=("star_tracker", "gyro"),
+    figures=figures,
+    description=(
+        "Integrates the gyro rates on their own grid (003 §2.3 schemes), fits the initial attitude and "
+        "constant gyro offsets to the star-tracker quaternions by Gauss-Newton with the variational "
+        "equations (003 §2.2, eqs. 5-7), and reports offsets in sensor and body frames with honest "
+        "(gyro-noise) and paper sigmas, residuals per sensor axis, sub-interval offsets and, optionally, "
+        "the mounting with an observability check."
+    ),
+)

@@ -1,0 +1,378 @@
+"""Job ``star_tracker_accuracy`` (paper 003 §1.3-1.5): accuracy of a star tracker from flight data.
+
+Thin layer over :func:`processing.star_tracker_accuracy.analyze_star_tracker_accuracy`: picks the
+sensor and its mounting from the configuration, the gyro stream when present, converts radians to
+arcseconds at the edge and draws the report figures in the spirit of 003 figures 1-5.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Any, Literal
+
+import numpy as np
+from matplotlib.figure import Figure
+from pydantic import BaseModel, ConfigDict, Field
+
+from app.jobs.registry import JobType
+from processing.star_tracker_accuracy import (
+    StarTrackerAccuracy,
+    StarTrackerAccuracyError,
+    analyze_star_tracker_accuracy,
+)
+from processing.tasks import Progress, TaskError, TaskInputs, TaskResult
+
+ARCSEC_PER_RAD = 180.0 * 3600.0 / np.pi
+NS_PER_S = 1e9
+MAX_GYRO_TABLE_ROWS = 20_000
+"""The gyro comparison table is decimated (every k-th sample) to at most this many rows."""
+SPECTRUM_ZOOM_FACTOR = 4.0
+"""Zoomed spectra span 0 .. this x the smoother's cutoff frequency (003 figs. 3-5, lower panels)."""
+
+
+class Params(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    sensor: str | None = Field(
+        None, description="star tracker name; default: the only one configured, else the only one in the data")
+    harmonics: Literal["auto"] | Annotated[int, Field(ge=0)] = Field(
+        "auto", description="sine harmonics M of the 003 §1.3 smoother, or 'auto' (2 x the GCV choice)")
+    use_gyro: bool = Field(True, description="use gyro rates (comparison, lines, removal of real motion)")
+
+
+def _as_list(values: Any, scale: float = 1.0) -> list[float | None]:
+    return [float(v) * scale if np.isfinite(v) else None for v in np.asarray(values, dtype=float).ravel()]
+
+
+def _pick_sensor(inputs: TaskInputs, requested: str | None) -> tuple[str, np.ndarray]:
+    configured = dict(inputs.config.get("star_trackers") or {})
+    present = sorted(set(np.asarray(inputs.stream("star_tracker")["sensor"]).astype(str).tolist()))
+    if requested is not None:
+        sensor = requested
+    elif len(configured) == 1:
+        sensor = next(iter(configured))
+    elif len(present) == 1:
+        sensor = present[0]
+    else:
+        raise TaskError(
+            f"params.sensor is required: the star tracker is ambiguous (configured: {sorted(configured) or 'none'}, "
+            f"in the data: {present})"
+        )
+    mounting = (configured.get(sensor) or {}).get("q_BS")
+    if mounting is None:
+        raise TaskError(
+            f"no mounting q_BS configured for star tracker {sensor!r} (configured: {sorted(configured) or 'none'}); "
+            "add star_trackers.<name>.q_BS to the spacecraft configuration"
+        )
+    q_BS = np.asarray(mounting, dtype=float)
+    if q_BS.shape != (4,) or not np.all(np.isfinite(q_BS)) or np.linalg.norm(q_BS) < 0.5:
+        raise TaskError(f"star_trackers.{sensor}.q_BS must be 4 finite numbers of unit norm, got {mounting!r}")
+    return sensor, q_BS
+
+
+def _gyro(inputs: TaskInputs, notes: list[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    cols = inputs.streams.get("gyro")
+    if cols is None or len(cols["time_tai_ns"]) == 0:
+        notes.append("no gyro samples in the window: real motion not separated from sensor noise")
+        return None
+    sensors = sorted(set(np.asarray(cols["sensor"]).astype(str).tolist()))
+    if len(sensors) > 1:
+        notes.append(f"several gyro sensors {sensors}: used {sensors[0]!r}")
+    g = inputs.stream("gyro", sensors[0])
+    order = np.argsort(np.asarray(g["time_tai_ns"], dtype=np.int64), kind="stable")
+    t = np.asarray(g["time_tai_ns"], dtype=np.int64)[order]
+    keep = np.concatenate([[True], np.diff(t) > 0])
+    w = np.column_stack([np.asarray(g[c], dtype=float)[order] for c in ("wx", "wy", "wz")])
+    q_BG = np.asarray((inputs.config.get("gyro") or {}).get("q_BG", [1.0, 0.0, 0.0, 0.0]), dtype=float)
+    return t[keep], w[keep], q_BG
+
+
+def _line_entry(line: Any) -> dict[str, Any]:
+    return {
+        "source": line.source,
+        "axis": line.axis,
+        "freq_hz": float(line.freq_hz),
+        "amplitude_arcsec_s": None if line.amplitude_rad_s is None else float(line.amplitude_rad_s * ARCSEC_PER_RAD),
+        "attitude_amplitude_arcsec": float(line.attitude_amplitude_rad * ARCSEC_PER_RAD),
+        "attitude_rms_arcsec": float(line.attitude_rms_rad * ARCSEC_PER_RAD),
+        "aliased_freq_hz": float(line.aliased_freq_hz),
+        "removed": bool(line.removed),
+    }
+
+
+def _summary(r: StarTrackerAccuracy, sensor: str, params: Params, gyro_used: bool) -> dict[str, Any]:
+    harmonics = r.harmonics
+    used = int(np.count_nonzero(r.segment >= 0))
+    summary: dict[str, Any] = {
+        "sensor": sensor,
+        "sigma_arcsec": _as_list(r.sigma_rad, ARCSEC_PER_RAD),
+        "sigma_smoothing_arcsec": _as_list(r.sigma_smoothing_rad, ARCSEC_PER_RAD),
+        "sigma_robust_arcsec": _as_list(r.sigma_robust_rad, ARCSEC_PER_RAD),
+        "sigma_smoothing_robust_arcsec": _as_list(r.sigma_smoothing_robust_rad, ARCSEC_PER_RAD),
+        "sigma_eq2_arcsec": _as_list(r.sigma_eq2_rad, ARCSEC_PER_RAD),
+        "motion_rms_arcsec": _as_list(r.motion_rms_rad, ARCSEC_PER_RAD),
+        "axes": ["x1", "x2", "x3"],
+        "harmonics": int(round(float(np.median(harmonics)))),
+        "harmonics_per_segment": [int(m) for m in harmonics],
+        "harmonics_mode": "auto" if params.harmonics == "auto" else "manual",
+        "cutoff_hz": float(max(s.cutoff_hz for s in r.segments)),
+        "n_samples": used,
+        "n_segments": len(r.segments),
+        "sample_period_s": float(r.sample_period_s),
+        "gyro_used": gyro_used,
+        "spectral_lines": [_line_entry(line) for line in r.lines],
+    }
+    if r.gyro is not None:
+        g = r.gyro
+        summary.update(
+            gyro_rate_rms_diff_arcsec_s=_as_list(g.rms_diff_rad_s, ARCSEC_PER_RAD),
+            gyro_rate_rms_diff_expected_arcsec_s=_as_list(g.expected_rms_diff_rad_s, ARCSEC_PER_RAD),
+            gyro_offset_arcsec_s=_as_list(g.offset_rad_s, ARCSEC_PER_RAD),
+            gyro_noise_sigma_arcsec_s=_as_list(g.noise_sigma_rad_s, ARCSEC_PER_RAD),
+            gyro_smoothing_sigma_arcsec_s=_as_list(g.smoothing_sigma_rad_s, ARCSEC_PER_RAD),
+            gyro_axes=["y1", "y2", "y3"],
+        )
+    return summary
+
+
+def _tables(r: StarTrackerAccuracy) -> dict[str, dict[str, np.ndarray]]:
+    rows = r.segment >= 0
+    a = ARCSEC_PER_RAD
+    res: dict[str, np.ndarray] = {"time_tai_ns": r.time_tai_ns[rows], "segment": r.segment[rows]}
+    for i in range(3):
+        res[f"e{i + 1}_arcsec"] = r.residuals_smoothing_rad[rows, i] * a
+    for i in range(3):
+        res[f"e{i + 1}_corrected_arcsec"] = r.residuals_rad[rows, i] * a
+        res[f"e{i + 1}_eq2_arcsec"] = r.residuals_eq2_rad[rows, i] * a
+        res[f"motion{i + 1}_arcsec"] = r.motion_rad[rows, i] * a
+    for i in range(3):
+        res[f"z{i + 1}"] = r.z[rows, i]
+        res[f"z{i + 1}_fit"] = r.z_fit[rows, i]
+    rates: dict[str, np.ndarray] = {"time_tai_ns": r.time_tai_ns[rows]}
+    for i in range(3):
+        rates[f"w{i + 1}_B_arcsec_s"] = r.w_B_rad_s[rows, i] * a
+    for i in range(3):
+        rates[f"w{i + 1}_S_arcsec_s"] = r.w_S_rad_s[rows, i] * a
+    tables = {"residuals": res, "rates": rates}
+    if r.gyro is not None:
+        step = max(1, int(np.ceil(r.gyro.time_tai_ns.size / MAX_GYRO_TABLE_ROWS)))
+        g = {"time_tai_ns": r.gyro.time_tai_ns[::step]}
+        for i in range(3):
+            g[f"w{i + 1}_B_star_tracker_arcsec_s"] = r.gyro.w_B_star_tracker_rad_s[::step, i] * a
+            g[f"w{i + 1}_B_gyro_arcsec_s"] = r.gyro.w_B_gyro_rad_s[::step, i] * a
+        tables["gyro_comparison"] = g
+    names = {"gyro": "arcsec_s", "star_tracker_rate": "arcsec_s", "star_tracker_residuals": "arcsec"}
+    for name, spec in r.spectra.items():
+        amp = spec.amplitude.reshape(spec.freq_hz.size, -1) * a
+        tables[f"spectrum_{name}"] = {
+            "freq_hz": spec.freq_hz, **{f"a{i + 1}_{names[name]}": amp[:, i] for i in range(amp.shape[1])}
+        }
+    seg = r.segments
+    tables["segments"] = {
+        "time_tai_ns": np.array([r.time_tai_ns[s.start] for s in seg], dtype=np.int64),
+        "end_tai_ns": np.array([r.time_tai_ns[s.stop - 1] for s in seg], dtype=np.int64),
+        "n_samples": np.array([s.stop - s.start for s in seg], dtype=np.int64),
+        "harmonics": np.array([s.harmonics for s in seg], dtype=np.int64),
+        "cutoff_hz": np.array([s.cutoff_hz for s in seg]),
+        "dof": np.array([s.dof for s in seg], dtype=np.int64),
+        **{f"sigma{i + 1}_arcsec": np.array([np.sqrt(s.rss_rad2[i] / s.dof) * a if s.dof > 0 else np.nan
+                                              for s in seg]) for i in range(3)},
+    }
+    return tables
+
+
+def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
+    progress(0.02, "loading")
+    sensor, q_BS = _pick_sensor(inputs, params.sensor)
+    st = inputs.stream("star_tracker", sensor)
+    order = np.argsort(np.asarray(st["time_tai_ns"], dtype=np.int64), kind="stable")
+    t = np.asarray(st["time_tai_ns"], dtype=np.int64)[order]
+    q = np.column_stack([np.asarray(st[f"q{i}"], dtype=float)[order] for i in range(4)])
+    keep = np.concatenate([[True], np.diff(t) > 0])
+    notes: list[str] = []
+    if not np.all(keep):
+        notes.append(f"{int(np.sum(~keep))} star-tracker samples with repeated times dropped")
+    gyro = _gyro(inputs, notes) if params.use_gyro else None
+    if not params.use_gyro:
+        notes.append("use_gyro = false: real motion not separated from sensor noise")
+    try:
+        result = analyze_star_tracker_accuracy(
+            t[keep], q[keep], q_BS,
+            gyro_time_tai_ns=None if gyro is None else gyro[0],
+            w_G_rad_s=None if gyro is None else gyro[1],
+            q_BG=(1.0, 0.0, 0.0, 0.0) if gyro is None else gyro[2],
+            harmonics=None if params.harmonics == "auto" else int(params.harmonics),
+            progress=lambda f, stage: progress(0.05 + 0.85 * f, stage),
+        )
+    except StarTrackerAccuracyError as exc:
+        raise TaskError(str(exc)) from exc
+    progress(0.95, "summary")
+    notes += list(result.notes)
+    notes.append(
+        "sigma_arcsec: residual std about the sensor axes after removing the attitude oscillation of the "
+        "gyro lines above the smoother cutoff; sigma_smoothing_arcsec: the 003 §1.4 figure with that motion in; "
+        "residuals are exact small rotations about x1 x2 x3 (sigma_eq2_arcsec: 003 eq. 2 literally)"
+    )
+    return TaskResult(
+        summary=_summary(result, sensor, params, result.gyro is not None),
+        tables=_tables(result),
+        notes=notes,
+    )
+
+
+# ---------------------------------------------------------------------------------------------
+# Figures (003 figs. 1-5)
+
+
+def _fmt(value: float | None) -> str:
+    return "n/a" if value is None else f"{value:.2f}"
+
+
+def _t_min(t_ns: np.ndarray, t0: int) -> np.ndarray:
+    return (np.asarray(t_ns, dtype=np.int64) - t0) / NS_PER_S / 60.0
+
+
+def _fig_rodrigues(result: TaskResult) -> Figure:
+    res = result.tables["residuals"]
+    s = result.summary
+    t0 = int(res["time_tai_ns"][0])
+    tm = _t_min(res["time_tai_ns"], t0)
+    fig = Figure(figsize=(9, 7), label="Rodrigues parameters of q_c^-1 o q_n and their sine-series fit (003 fig. 1a)")
+    axes = fig.subplots(3, 1, sharex=True)
+    for i, ax in enumerate(axes):
+        for seg in np.unique(res["segment"]):
+            m = res["segment"] == seg
+            ax.plot(tm[m], res[f"z{i + 1}_fit"][m], color="tab:blue", lw=1.0)
+        ax.plot(tm[::10], res[f"z{i + 1}"][::10], "o", ms=3, mfc="none", color="tab:red")
+        ax.set_ylabel(f"z{i + 1}")
+        ax.grid(alpha=0.3)
+    axes[0].set_title(f"N = {s['n_samples']}, M = {s['harmonics']}: fit (line), every 10th sample (markers)")
+    axes[-1].set_xlabel("time since first sample [min]")
+    return fig
+
+
+def _fig_residuals(result: TaskResult) -> Figure:
+    res = result.tables["residuals"]
+    s = result.summary
+    tm = _t_min(res["time_tai_ns"], int(res["time_tai_ns"][0]))
+    fig = Figure(figsize=(9, 7), label="Smoothing residuals about the sensor axes (003 fig. 1b)")
+    axes = fig.subplots(3, 1, sharex=True)
+    for i, ax in enumerate(axes):
+        sig_raw, sig = s["sigma_smoothing_arcsec"][i], s["sigma_arcsec"][i]
+        ax.plot(tm, res[f"e{i + 1}_arcsec"], lw=0.7, color="tab:gray", label="e (003 eq. 2)")
+        if s["gyro_used"]:
+            ax.plot(tm, res[f"e{i + 1}_corrected_arcsec"], lw=0.7, color="tab:blue", label="real motion removed")
+        for v, style in ((sig_raw, "-"), (sig, "--")):
+            if v is not None:
+                ax.axhline(v, color="tab:red", ls=style, lw=1)
+                ax.axhline(-v, color="tab:red", ls=style, lw=1)
+        ax.set_ylabel(f"e{i + 1} [arcsec]")
+        ax.set_title(f"x{i + 1}: sigma_smoothing = {_fmt(sig_raw)}\", sigma = {_fmt(sig)}\"", fontsize=9)
+        ax.grid(alpha=0.3)
+    axes[0].legend(loc="upper right", fontsize=8)
+    axes[-1].set_xlabel("time since first sample [min]")
+    return fig
+
+
+def _fig_rates(result: TaskResult) -> Figure:
+    s = result.summary
+    fig = Figure(figsize=(9, 7), label="Angular velocity from the star tracker and smoothed gyro rates (003 fig. 2)")
+    axes = fig.subplots(3, 1, sharex=True)
+    rates = result.tables["rates"]
+    t0 = int(rates["time_tai_ns"][0])
+    for i, ax in enumerate(axes):
+        if "gyro_comparison" in result.tables:
+            g = result.tables["gyro_comparison"]
+            tg = _t_min(g["time_tai_ns"], t0)
+            ax.plot(tg, g[f"w{i + 1}_B_gyro_arcsec_s"], color="tab:orange", lw=1.2,
+                    label="gyro, smoothed, offset removed")
+            ax.plot(tg, g[f"w{i + 1}_B_star_tracker_arcsec_s"], color="tab:blue", lw=0.8, label="star tracker")
+            diff = s["gyro_rate_rms_diff_arcsec_s"][i]
+            ax.set_title(f"y{i + 1}: rms difference {_fmt(diff)}\"/s "
+                         f"(expected {_fmt(s['gyro_rate_rms_diff_expected_arcsec_s'][i])}\"/s)", fontsize=9)
+        else:
+            ax.plot(_t_min(rates["time_tai_ns"], t0), rates[f"w{i + 1}_B_arcsec_s"], color="tab:blue", lw=0.8,
+                    label="star tracker")
+        ax.set_ylabel(f"w{i + 1} [arcsec/s]")
+        ax.grid(alpha=0.3)
+    axes[0].legend(loc="upper right", fontsize=8)
+    axes[-1].set_xlabel("time since first sample [min]")
+    return fig
+
+
+def _fig_spectra(result: TaskResult) -> Figure:
+    s = result.summary
+    fig = Figure(figsize=(10, 8), label="Amplitude spectra of the angular velocity (003 figs. 3-5)")
+    axes = fig.subplots(3, 2)
+    zoom = SPECTRUM_ZOOM_FACTOR * s["cutoff_hz"]
+    st = result.tables["spectrum_star_tracker_rate"]
+    gy = result.tables.get("spectrum_gyro")
+    for i in range(3):
+        full, zoomed = axes[i]
+        if gy is not None:
+            band = gy["freq_hz"] <= 0.5
+            full.plot(gy["freq_hz"][band], gy[f"a{i + 1}_arcsec_s"][band], lw=0.7, color="tab:orange", label="gyro")
+            zb = gy["freq_hz"] <= zoom
+            zoomed.plot(gy["freq_hz"][zb], gy[f"a{i + 1}_arcsec_s"][zb], lw=1.0, color="tab:orange", label="gyro")
+        sb = st["freq_hz"] <= zoom
+        zoomed.plot(st["freq_hz"][sb], st[f"a{i + 1}_arcsec_s"][sb], lw=1.0, color="tab:blue", ls="--",
+                    label="star tracker")
+        zoomed.axvline(s["cutoff_hz"], color="gray", lw=0.8, ls=":")
+        full.set_ylabel(f"A(f), w{i + 1} [arcsec/s]")
+        for ax in (full, zoomed):
+            ax.grid(alpha=0.3)
+        for line in s["spectral_lines"]:
+            if line["source"] == "gyro" and line["axis"] == f"y{i + 1}" and line["freq_hz"] <= 0.5:
+                full.annotate(f"{line['freq_hz']:.3f} Hz\n{line['amplitude_arcsec_s']:.2f}\"/s",
+                              (line["freq_hz"], line["amplitude_arcsec_s"]), fontsize=7)
+    axes[0, 0].set_title("0 - 0.5 Hz")
+    axes[0, 1].set_title(f"0 - {zoom:.3f} Hz (dotted: smoother cutoff)")
+    axes[0, 1].legend(fontsize=8)
+    axes[-1, 0].set_xlabel("frequency [Hz]")
+    axes[-1, 1].set_xlabel("frequency [Hz]")
+    return fig
+
+
+def _fig_residual_spectrum(result: TaskResult) -> Figure:
+    s = result.summary
+    spec = result.tables["spectrum_star_tracker_residuals"]
+    fig = Figure(figsize=(9, 6), label="Amplitude spectra of the star-tracker residuals, aliased lines marked")
+    axes = fig.subplots(3, 1, sharex=True)
+    aliases = sorted({round(x["aliased_freq_hz"], 5) for x in s["spectral_lines"] if x["source"] == "gyro"})
+    for i, ax in enumerate(axes):
+        ax.plot(spec["freq_hz"], spec[f"a{i + 1}_arcsec"], lw=0.8)
+        for f in aliases:
+            ax.axvline(f, color="tab:red", ls="--", lw=0.8)
+        ax.axvline(s["cutoff_hz"], color="gray", lw=0.8, ls=":")
+        ax.set_ylabel(f"A(f), e{i + 1} [arcsec]")
+        ax.grid(alpha=0.3)
+    axes[0].set_title("dashed: gyro lines aliased to the star-tracker sampling; dotted: smoother cutoff", fontsize=9)
+    axes[-1].set_xlabel("frequency [Hz]")
+    return fig
+
+
+def figures(result: TaskResult, params: Params) -> dict[str, Figure]:
+    return {
+        "rodrigues_fit": _fig_rodrigues(result),
+        "residuals": _fig_residuals(result),
+        "rates": _fig_rates(result),
+        "spectra": _fig_spectra(result),
+        "residual_spectra": _fig_residual_spectrum(result),
+    }
+
+
+JOB = JobType(
+    applies_calibration="gyro",
+    name="star_tracker_accuracy",
+    title="Star-tracker accuracy from flight data",
+    paper="003 §1",
+    params=Params,
+    run=run,
+    streams=("star_tracker",),
+    optional_streams=("gyro",),
+    figures=figures,
+    description=(
+        "Per-axis accuracy of a star tracker from its quaternions (003 §1.3-1.5): mean quaternion, Rodrigues "
+        "parameters smoothed by a sine series plus linear trend, residual std about the sensor axes; with gyro "
+        "data the real high-frequency motion (spectral lines) is removed, the rates are compared and the spectra "
+        "show where lines alias into the star-tracker samples."
+    ),
+)

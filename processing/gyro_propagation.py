@@ -1,0 +1,386 @@
+"""Kinematics q' = 1/2 q o w integrated directly on the gyro grid, with pseudo-derivatives (003 §2.2-2.3).
+
+Paper 003 (Avanesov et al., Keldysh preprint 74, 2010) §2.3 integrates eq. (5) ``dp/dt = 1/2 p o w'``
+(eq. 3') on the gyro grid t'_k by ``p(t'_{k+1}) = p(t'_k) o kappa_k`` with, tau_k = (t'_{k+1} - t'_k)/4:
+
+- scheme 1 (trapezoid): kappa_k = (1, tau_k w_k) o (1, -tau_k w_{k+1})^-1; not norm-preserving,
+  |p_{k+1}| = |p_k| sqrt((1 + tau² |w_k|²) / (1 + tau² |w_{k+1}|²)) (the product telescopes);
+- scheme 2 (midpoint rate w_{k+1/2} = (w_k + w_{k+1})/2): kappa_k = (1 - tau²|w|², 2 tau w) / (1 + tau²|w|²),
+  |kappa_k| = 1.
+
+Vectorisation. The attitude at every node is the prefix product U_k = kappa_0 o ... o kappa_{k-1}, computed
+by :func:`quat_cumprod`, an associative scan over blocks of ``SCAN_BLOCK`` (scanned position by position
+across all blocks at once, or by Hillis-Steele doubling) applied recursively to the block totals
+(components-first arrays): about 2 N quaternion products, log(N)/log(SCAN_BLOCK) levels of recursion and
+no Python loop over samples.
+
+Pseudo-derivatives (003 §2.2, eq. 7). For a parameter x the pseudo-derivative psi = dPsi/dx is the vector
+with dp/dx = 1/2 p o psi. Eq. (7), dpsi/dt + w' x psi = dw'/dx, is linear with the solution
+psi(t) = R(U_t)^T [psi(t0) + int R(U_s) dw'/dx ds]: the initial value carried by the motion and a
+cumulative sum of rotated forcing terms. Discretised by the same scheme as the attitude (the exact
+linearisation of the kappa_k recursion, rather than 003's separate Cramer's-rule step; the two agree to
+O(h³) per step, see tests), a rate perturbation dw_k at the nodes gives
+
+    psi_k = R(U_k)^T [psi_0 + sum_{j<k} R(U_{j+1}) (A_j dw_j + B_j dw_{j+1})],
+
+where g_j = A_j dw_j + B_j dw_{j+1} = 2 vec(kappa_j^-1 o dkappa_j) (:func:`step_rate_jacobians`). The
+scalar part of kappa^-1 o dkappa (a change of |p| in scheme 1) is dropped, as 003 drops it. Rotations by
+non-unit quaternions mean rotations by the normalised ones.
+
+Times t_s are float64 seconds from any epoch; rates rad/s in the frame being propagated (body, or the
+star-tracker frame in 003 §2.4); quaternions scalar first, Hamilton, (..., 4).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+__all__ = [
+    "SCAN_BLOCK",
+    "GyroPropagationError",
+    "Propagation",
+    "mrp_pseudo_derivatives",
+    "propagate",
+    "quat_cumprod",
+    "step_quaternions",
+    "step_rate_jacobians",
+]
+
+SCAN_BLOCK = 16
+"""Block length of the recursive blocked prefix scan (measured fastest among 8..64 at 1e4..1e6 samples)."""
+
+FloatArray = NDArray[np.float64]
+
+
+class GyroPropagationError(ValueError):
+    """Bad input to the gyro-grid integration: shapes, non-increasing times, outputs outside the grid."""
+
+
+# ---------------------------------------------------------------------------------------------------
+# Internals work components-first: quaternions (4, n), vectors (3, n), matrices (3, 3, n), so that every
+# arithmetic pass runs over one contiguous array (about 3x faster than (n, 4) rows at 1e6 samples).
+
+
+def _qmul_cf(p: FloatArray, q: FloatArray) -> FloatArray:
+    """Hamilton product of components-first quaternions p (4, ...), q (4, ...) (broadcasting)."""
+    p0, p1, p2, p3 = p
+    q0, q1, q2, q3 = q
+    out = np.empty(np.broadcast_shapes(p.shape, q.shape))
+    out[0] = p0 * q0 - p1 * q1 - p2 * q2 - p3 * q3
+    out[1] = p0 * q1 + p1 * q0 + p2 * q3 - p3 * q2
+    out[2] = p0 * q2 - p1 * q3 + p2 * q0 + p3 * q1
+    out[3] = p0 * q3 + p1 * q2 - p2 * q1 + p3 * q0
+    return out
+
+
+def _dcm_cf(q: FloatArray) -> FloatArray:
+    """R(q/|q|) (3, 3, ...) of components-first quaternions q (4, ...) of any non-zero norm."""
+    w, x, y, z = q
+    s = 2.0 / (w * w + x * x + y * y + z * z)
+    xs, ys, zs = x * s, y * s, z * s
+    wx, wy, wz = w * xs, w * ys, w * zs
+    xx, xy, xz = x * xs, x * ys, x * zs
+    yy, yz, zz = y * ys, y * zs, z * zs
+    out = np.empty((3, 3, *q.shape[1:]))
+    out[0, 0], out[0, 1], out[0, 2] = 1.0 - (yy + zz), xy - wz, xz + wy
+    out[1, 0], out[1, 1], out[1, 2] = xy + wz, 1.0 - (xx + zz), yz - wx
+    out[2, 0], out[2, 1], out[2, 2] = xz - wy, yz + wx, 1.0 - (xx + yy)
+    return out
+
+
+def _matmul_cf(a: FloatArray, b: FloatArray) -> FloatArray:
+    """a @ b for stacks a (3, 3, ...), b (3, m, ...) stored components-first. Returns (3, m, ...)."""
+    out = np.empty((3, b.shape[1], *np.broadcast_shapes(a.shape[2:], b.shape[2:])))
+    for i in range(3):
+        for k in range(b.shape[1]):
+            out[i, k] = a[i, 0] * b[0, k] + a[i, 1] * b[1, k] + a[i, 2] * b[2, k]
+    return out
+
+
+def _eye_minus_cross_cf(v: FloatArray, scale: FloatArray) -> FloatArray:
+    """scale (I - [v x]) as (3, 3, ...) from v (3, ...)."""
+    out = np.empty((3, 3, *v.shape[1:]))
+    out[0, 0] = out[1, 1] = out[2, 2] = scale
+    out[0, 1], out[0, 2] = scale * v[2], -scale * v[1]
+    out[1, 0], out[1, 2] = -scale * v[2], scale * v[0]
+    out[2, 0], out[2, 1] = scale * v[1], -scale * v[0]
+    return out
+
+
+def _pad_blocks(k: FloatArray, n_blocks: int) -> FloatArray:
+    """(4, n) -> (4, SCAN_BLOCK, n_blocks), identity-padded, position within the block first."""
+    n = k.shape[1]
+    padded = np.empty((4, n_blocks * SCAN_BLOCK))
+    padded[:, :n] = k
+    padded[0, n:], padded[1:, n:] = 1.0, 0.0
+    return np.ascontiguousarray(padded.reshape(4, n_blocks, SCAN_BLOCK).transpose(0, 2, 1))
+
+
+def _cumprod_cf(k: FloatArray, method: str = "blocked") -> FloatArray:
+    """Inclusive prefix products of (4, n) quaternions, recursive over blocks of SCAN_BLOCK.
+
+    Inside the blocks: "blocked" runs along the SCAN_BLOCK positions, vectorised across all blocks at
+    once (about 2 n products in total); "doubling" is the Hillis-Steele log-depth scan (about
+    (log2(SCAN_BLOCK) + 1) n products). Either way the block totals are scanned recursively and multiplied
+    back in, so the Python-level iteration count is O(SCAN_BLOCK log(n) / log(SCAN_BLOCK)), independent of
+    the sample count up to that logarithm. Measured at n = 864,000: 0.05 s blocked, 0.12 s doubling.
+    """
+    n = k.shape[1]
+    if n <= SCAN_BLOCK:
+        x = k.copy()
+        for i in range(1, n):
+            x[:, i] = _qmul_cf(x[:, i - 1], x[:, i])
+        return x
+    n_blocks = -(-n // SCAN_BLOCK)
+    x = _pad_blocks(k, n_blocks)  # (4, L, B): slices along L are contiguous runs of B
+    if method == "blocked":
+        for i in range(1, SCAN_BLOCK):
+            x[:, i] = _qmul_cf(x[:, i - 1], x[:, i])
+    elif method == "doubling":
+        s = 1
+        while s < SCAN_BLOCK:
+            x[:, s:] = _qmul_cf(x[:, :-s], x[:, s:])
+            s *= 2
+    else:
+        raise GyroPropagationError(f"method must be 'blocked' or 'doubling', got {method!r}")
+    totals = _cumprod_cf(np.ascontiguousarray(x[:, -1]), method)
+    x[:, :, 1:] = _qmul_cf(totals[:, None, :-1], x[:, :, 1:])
+    return x.transpose(0, 2, 1).reshape(4, -1)[:, :n]
+
+
+def _kappa_cf(tau: FloatArray, ws: FloatArray, we: FloatArray, scheme: int) -> FloatArray:
+    """Step quaternions (4, n) of 003 §2.3 from tau = dt/4 (n,) and end rates (3, n)."""
+    out = np.empty((4, tau.size))
+    if scheme == 1:
+        a, b = tau * ws, tau * we
+        inv = 1.0 / (1.0 + b[0] * b[0] + b[1] * b[1] + b[2] * b[2])
+        out[0] = (1.0 - (a[0] * b[0] + a[1] * b[1] + a[2] * b[2])) * inv
+        out[1] = (a[0] + b[0] + a[1] * b[2] - a[2] * b[1]) * inv
+        out[2] = (a[1] + b[1] + a[2] * b[0] - a[0] * b[2]) * inv
+        out[3] = (a[2] + b[2] + a[0] * b[1] - a[1] * b[0]) * inv
+    else:
+        v = (0.5 * tau) * (ws + we)
+        vv = v[0] * v[0] + v[1] * v[1] + v[2] * v[2]
+        inv = 1.0 / (1.0 + vv)
+        out[0] = (1.0 - vv) * inv
+        out[1:] = (2.0 * inv) * v
+    return out
+
+
+def _jacobians_cf(tau: FloatArray, ws: FloatArray, we: FloatArray, scheme: int) -> tuple[FloatArray, FloatArray]:
+    """A, B (3, 3, n) of :func:`step_rate_jacobians`, components-first."""
+    if scheme == 1:
+        vs, ve = tau * ws, tau * we
+        ns = 1.0 + vs[0] * vs[0] + vs[1] * vs[1] + vs[2] * vs[2]
+        ne = 1.0 + ve[0] * ve[0] + ve[1] * ve[1] + ve[2] * ve[2]
+        u_end = np.concatenate([np.ones((1, tau.size)), ve])
+        r_end_t = _dcm_cf(u_end).transpose(1, 0, 2)
+        a = _matmul_cf(r_end_t, _eye_minus_cross_cf(vs, 2.0 * tau / ns))
+        b = _eye_minus_cross_cf(ve, 2.0 * tau / ne)
+        return a, b
+    v = (0.5 * tau) * (ws + we)
+    vv = v[0] * v[0] + v[1] * v[1] + v[2] * v[2]
+    c = 2.0 * tau / (1.0 + vv) ** 2
+    g = 2.0 * c * v[:, None] * v[None, :]
+    diag = c * (1.0 - vv)
+    for i in range(3):
+        g[i, i] += diag
+    g[0, 1] += 2.0 * c * v[2]
+    g[0, 2] -= 2.0 * c * v[1]
+    g[1, 0] -= 2.0 * c * v[2]
+    g[1, 2] += 2.0 * c * v[0]
+    g[2, 0] += 2.0 * c * v[1]
+    g[2, 1] -= 2.0 * c * v[0]
+    return g, g
+
+
+# ---------------------------------------------------------------------------------------------------
+# Public row-layout (n, 4) / (n, 3) wrappers.
+
+
+def _check_scheme(scheme: int) -> int:
+    if scheme not in (1, 2):
+        raise GyroPropagationError(f"scheme must be 1 (trapezoid) or 2 (midpoint), got {scheme!r}")
+    return int(scheme)
+
+
+def quat_cumprod(kappa: ArrayLike, method: str = "blocked") -> FloatArray:
+    """Inclusive prefix products c_i = kappa_0 o kappa_1 o ... o kappa_i of (n, 4) quaternions.
+
+    Vectorised associative scan: the sequence is cut into blocks of ``SCAN_BLOCK``, scanned inside the
+    blocks (method "blocked": position by position across all blocks at once, ~2 n products; "doubling":
+    Hillis-Steele, ~5 n products), the block totals are scanned recursively and multiplied back in
+    (depth log(n)/log(SCAN_BLOCK)). Works for non-unit quaternions (003 §2.3 scheme 1). Rounding grows
+    like (SCAN_BLOCK + log n) eps, not n eps. Returns (n, 4).
+    """
+    k = np.asarray(kappa, dtype=np.float64)
+    if k.ndim != 2 or k.shape[1] != 4:
+        raise GyroPropagationError(f"kappa must have shape (n, 4), got {k.shape}")
+    if k.shape[0] == 0:
+        return k.copy()
+    return np.ascontiguousarray(_cumprod_cf(np.ascontiguousarray(k.T), method).T)
+
+
+def _rows3(x: ArrayLike, name: str) -> FloatArray:
+    a = np.asarray(x, dtype=np.float64)
+    if a.ndim != 2 or a.shape[1] != 3:
+        raise GyroPropagationError(f"{name} must have shape (n, 3), got {a.shape}")
+    return np.ascontiguousarray(a.T)
+
+
+def step_quaternions(dt_s: ArrayLike, w_start: ArrayLike, w_end: ArrayLike, scheme: int) -> FloatArray:
+    """Step quaternions kappa (n, 4) of 003 §2.3 over intervals of length dt_s (n,).
+
+    w_start, w_end (n, 3) rad/s: rates at the two ends of each interval. Scheme 1 (trapezoid):
+    kappa = (1, tau w_start) o (1, -tau w_end)^-1 = (1, tau w_start) o (1, tau w_end) / (1 + tau² |w_end|²),
+    tau = dt/4. Scheme 2: the Cayley step of the midpoint rate w_m = (w_start + w_end)/2,
+    (1 - tau²|w_m|², 2 tau w_m)/(1 + tau²|w_m|²), unit norm.
+    """
+    scheme = _check_scheme(scheme)
+    tau = 0.25 * np.asarray(dt_s, dtype=np.float64).reshape(-1)
+    return np.ascontiguousarray(_kappa_cf(tau, _rows3(w_start, "w_start"), _rows3(w_end, "w_end"), scheme).T)
+
+
+def step_rate_jacobians(
+    dt_s: ArrayLike, w_start: ArrayLike, w_end: ArrayLike, scheme: int
+) -> tuple[FloatArray, FloatArray]:
+    """Matrices A, B (n, 3, 3) with 2 vec(kappa^-1 o dkappa) = A dw_start + B dw_end (003 §2.3 schemes).
+
+    Scheme 1, with v = tau w (tau = dt/4) and u = (1, v):
+      A = 2 tau R(u_end)^T (I - [v_start x]) / (1 + |v_start|²),  B = 2 tau (I - [v_end x]) / (1 + |v_end|²);
+    scheme 2, with v = tau (w_start + w_end)/2:
+      A = B = 2 tau / (1 + |v|²)² [(1 - |v|²) I - 2 [v x] + 2 v v^T]
+    (the derivative of the Cayley map; cf. 003 §1.3's w(z, z') formula). A + B = dt I + O(dt² |w|).
+    """
+    scheme = _check_scheme(scheme)
+    tau = 0.25 * np.asarray(dt_s, dtype=np.float64).reshape(-1)
+    a, b = _jacobians_cf(tau, _rows3(w_start, "w_start"), _rows3(w_end, "w_end"), scheme)
+    return np.ascontiguousarray(a.transpose(2, 0, 1)), np.ascontiguousarray(b.transpose(2, 0, 1))
+
+
+def mrp_pseudo_derivatives(z: ArrayLike) -> FloatArray:
+    """Initial pseudo-derivatives dPsi/dz (3, 3), column k = d psi / d z_k, of p(t0) = p(z) (003 §2.2).
+
+    003 §2.2: d psi_1/d z_1 = s (z_1 p_1 + p_0), d psi_2/d z_1 = s (z_1 p_2 - p_3), ... i.e.
+    dPsi/dz = s (p_vec z^T + p_0 I - [p_vec x]) with s = 4/(1 + |z|²) and p = p(z) the quaternion of the
+    (modified) Rodrigues parameters z: p_0 = (1 - |z|²)/(1 + |z|²), p_vec = 2 z/(1 + |z|²).
+    """
+    z = np.asarray(z, dtype=np.float64)
+    if z.shape != (3,):
+        raise GyroPropagationError(f"z must have shape (3,), got {z.shape}")
+    zz = float(z @ z)
+    p0 = (1.0 - zz) / (1.0 + zz)
+    pv = 2.0 * z / (1.0 + zz)
+    s = 4.0 / (1.0 + zz)
+    cross = np.array([[0.0, -pv[2], pv[1]], [pv[2], 0.0, -pv[0]], [-pv[1], pv[0], 0.0]])
+    return s * (np.outer(pv, z) + p0 * np.eye(3) - cross)
+
+
+# ---------------------------------------------------------------------------------------------------
+# Propagation with pseudo-derivatives at output times.
+
+
+@dataclass(frozen=True)
+class Propagation:
+    """Result of :func:`propagate`; M output times, m rate parameters.
+
+    u_out (M, 4): U(t_n) with p(t_n) = p(t0) o U(t_n) (unit for scheme 2; |U| drifts slightly in
+    scheme 1, as 003 §2.3 states); rot_out (M, 3, 3): R(U(t_n)/|U|); psi_out (M, 3, m): pseudo-derivatives
+    at t_n of the m rate parameters with psi(t0) = 0 (the forcing part of eq. 7); the pseudo-derivative
+    of an initial-condition parameter with psi(t0) = c is rot_out^T c.
+    """
+
+    u_out: FloatArray
+    rot_out: FloatArray
+    psi_out: FloatArray
+
+
+def propagate(
+    t_s: ArrayLike,
+    w: ArrayLike,
+    t_out: ArrayLike,
+    *,
+    scheme: int = 2,
+    rate_jacobian: ArrayLike | None = None,
+    derivatives: bool = True,
+) -> Propagation:
+    """Integrate q' = 1/2 q o w from U(t_s[0]) = 1 on the grid and evaluate at t_out, with eq. (7).
+
+    t_s (N,) strictly increasing s; w (N, 3) rad/s at the nodes (w' of 003 eq. 5: measured rates plus
+    offsets, in the propagated frame); t_out (M,) s within [t_s[0], t_s[-1]]; scheme 1 or 2 (003 §2.3).
+    rate_jacobian: dw_k/dx (N, 3, m) of m parameters, default the identity (m = 3: the offsets Delta of
+    003 eq. 5, forcing e_k in eq. 7). Between nodes the rate is linear in time and an output is reached
+    by a partial step of the same scheme from the preceding node (the grid itself is untouched).
+    derivatives=False skips eq. (7) (psi_out is then (M, 3, 0)). Returns :class:`Propagation`.
+    Cost O(N log N / log SCAN_BLOCK), no Python loop over samples.
+    (003 §2.2, eqs. 5, 7; §2.3)
+    """
+    scheme = _check_scheme(scheme)
+    t = np.asarray(t_s, dtype=np.float64)
+    if t.ndim != 1 or t.size < 2:
+        raise GyroPropagationError(f"t_s must have shape (N,) with N >= 2, got {t.shape}")
+    n = t.size
+    wa = np.asarray(w, dtype=np.float64)
+    if wa.shape != (n, 3):
+        raise GyroPropagationError(f"w must have shape ({n}, 3) matching t_s, got {wa.shape}")
+    dt = np.diff(t)
+    if not np.all(dt > 0):
+        raise GyroPropagationError("t_s must be strictly increasing")
+    to = np.asarray(t_out, dtype=np.float64)
+    if to.ndim != 1:
+        raise GyroPropagationError(f"t_out must have shape (M,), got {to.shape}")
+    if to.size and not (to.min() >= t[0] and to.max() <= t[-1]):
+        raise GyroPropagationError(
+            f"t_out must lie within the gyro grid [{t[0]}, {t[-1]}] s, got [{to.min()}, {to.max()}]"
+        )
+    jac = None
+    m = 3
+    if rate_jacobian is not None:
+        jac_rows = np.asarray(rate_jacobian, dtype=np.float64)
+        if jac_rows.ndim != 3 or jac_rows.shape[:2] != (n, 3):
+            raise GyroPropagationError(f"rate_jacobian must have shape ({n}, 3, m), got {jac_rows.shape}")
+        m = jac_rows.shape[2]
+        jac = np.ascontiguousarray(jac_rows.transpose(1, 2, 0))  # (3, m, N)
+
+    wc = np.ascontiguousarray(wa.T)  # (3, N)
+    tau = 0.25 * dt
+    u_nodes = np.empty((4, n))
+    u_nodes[:, 0] = (1.0, 0.0, 0.0, 0.0)
+    u_nodes[:, 1:] = _cumprod_cf(_kappa_cf(tau, wc[:, :-1], wc[:, 1:], scheme))
+
+    # Partial steps of the same scheme from the preceding node k to each output time.
+    k = np.clip(np.searchsorted(t, to, side="right") - 1, 0, n - 2)
+    dtp = to - t[k]
+    f = dtp / dt[k]
+    w_k = wc[:, k]
+    w_o = (1.0 - f) * w_k + f * wc[:, k + 1]
+    u_out = _qmul_cf(u_nodes[:, k], _kappa_cf(0.25 * dtp, w_k, w_o, scheme))
+    rot = _dcm_cf(u_out)
+    if not derivatives:
+        return Propagation(
+            u_out=np.ascontiguousarray(u_out.T),
+            rot_out=np.ascontiguousarray(rot.transpose(2, 0, 1)),
+            psi_out=np.zeros((to.size, 3, 0)),
+        )
+
+    # Forcing sums S_k = sum_{j<k} R(U_{j+1}) (A_j D_j + B_j D_{j+1}), (3, m, N).
+    a, b = _jacobians_cf(tau, wc[:, :-1], wc[:, 1:], scheme)
+    g = a + b if jac is None else _matmul_cf(a, jac[:, :, :-1]) + _matmul_cf(b, jac[:, :, 1:])
+    forcing = np.zeros((3, m, n))
+    np.cumsum(_matmul_cf(_dcm_cf(u_nodes[:, 1:]), g), axis=-1, out=forcing[:, :, 1:])
+
+    # Pseudo-derivatives across the partial steps from the preceding node k to each output time.
+    ap, bp = _jacobians_cf(0.25 * dtp, w_k, w_o, scheme)
+    if jac is None:
+        gp = ap + bp
+    else:
+        gp = _matmul_cf(ap, jac[:, :, k]) + _matmul_cf(bp, (1.0 - f) * jac[:, :, k] + f * jac[:, :, k + 1])
+    psi = _matmul_cf(rot.transpose(1, 0, 2), forcing[:, :, k]) + gp
+    return Propagation(
+        u_out=np.ascontiguousarray(u_out.T),
+        rot_out=np.ascontiguousarray(rot.transpose(2, 0, 1)),
+        psi_out=np.ascontiguousarray(psi.transpose(2, 0, 1)),
+    )

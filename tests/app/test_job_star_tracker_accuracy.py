@@ -1,0 +1,159 @@
+"""Job ``star_tracker_accuracy`` (003 §1.3-1.5) on seed-003 simulator output: keys, types, figures, errors."""
+
+from __future__ import annotations
+
+import io
+import json
+from typing import Any
+
+import numpy as np
+import pytest
+from matplotlib.figure import Figure
+from pydantic import ValidationError
+
+from app.jobs.types.star_tracker_accuracy import JOB
+from processing.simulate.seed003 import Scenario003, simulate_seed003
+from processing.tasks import TaskError, TaskInputs, TaskResult, no_progress
+
+T0_NS = 1_900_000_000 * 1_000_000_000
+NS = 1_000_000_000
+
+
+def scenario(seed: int = 4, **kwargs: Any) -> Scenario003:
+    return simulate_seed003(start_tai_ns=T0_NS, seed=seed, gnss_period_s=1200.0, **kwargs)
+
+
+def inputs(sc: Scenario003, streams: dict[str, Any] | None = None, config: dict[str, Any] | None = None) -> TaskInputs:
+    return TaskInputs(
+        streams=sc.streams if streams is None else streams,
+        config=sc.config if config is None else config,
+        start_tai_ns=T0_NS,
+        end_tai_ns=T0_NS + 1200 * NS,
+    )
+
+
+def assert_json_plain(value: Any, path: str = "summary") -> None:
+    """Only dict/list/str/int/float/bool/None, finite floats (no numpy scalars)."""
+    if isinstance(value, dict):
+        for k, v in value.items():
+            assert isinstance(k, str), path
+            assert_json_plain(v, f"{path}.{k}")
+    elif isinstance(value, list):
+        for i, v in enumerate(value):
+            assert_json_plain(v, f"{path}[{i}]")
+    elif isinstance(value, float):
+        assert np.isfinite(value), path
+    else:
+        assert value is None or type(value) in (str, int, bool), f"{path}: {type(value)}"
+
+
+@pytest.fixture(scope="module")
+def default_result() -> tuple[Scenario003, TaskResult]:
+    sc = scenario()
+    return sc, JOB.run(inputs(sc), JOB.params(), no_progress)
+
+
+def test_job_declaration():
+    assert JOB.name == "star_tracker_accuracy" and JOB.paper == "003 §1"
+    assert JOB.streams == ("star_tracker",) and JOB.optional_streams == ("gyro",)
+    p = JOB.params()
+    assert (p.sensor, p.harmonics, p.use_gyro) == (None, "auto", True)
+    assert JOB.params(harmonics=40).harmonics == 40
+    for bad in ({"harmonics": -1}, {"harmonics": "many"}, {"colour": "red"}, {"use_gyro": "perhaps"}):
+        with pytest.raises(ValidationError):
+            JOB.params(**bad)
+
+
+def test_summary_keys_types_and_values(default_result):
+    sc, result = default_result
+    s = result.summary
+    assert_json_plain(s)
+    json.dumps(s, allow_nan=False)
+    for key in ("sigma_arcsec", "sigma_smoothing_arcsec", "sigma_robust_arcsec", "sigma_smoothing_robust_arcsec",
+                "sigma_eq2_arcsec", "motion_rms_arcsec", "gyro_rate_rms_diff_arcsec_s",
+                "gyro_rate_rms_diff_expected_arcsec_s", "gyro_offset_arcsec_s", "gyro_noise_sigma_arcsec_s",
+                "gyro_smoothing_sigma_arcsec_s"):
+        assert isinstance(s[key], list) and len(s[key]) == 3 and all(isinstance(v, float) for v in s[key]), key
+    assert s["sensor"] == "st1" and s["gyro_used"] is True and s["harmonics_mode"] == "auto"
+    assert isinstance(s["harmonics"], int) and s["harmonics_per_segment"] == [s["harmonics"]]
+    assert s["n_samples"] == sc.streams["star_tracker"]["time_tai_ns"].size and s["n_segments"] == 1
+    np.testing.assert_allclose(s["sigma_arcsec"], [2.5, 5.0, 15.0], rtol=0.12)
+    assert all(a < b for a, b in zip(s["sigma_arcsec"][:2], s["sigma_smoothing_arcsec"][:2], strict=True))
+    lines = s["spectral_lines"]
+    assert {k for line in lines for k in line} == {"source", "axis", "freq_hz", "amplitude_arcsec_s",
+                                                 "attitude_amplitude_arcsec", "attitude_rms_arcsec",
+                                                 "aliased_freq_hz", "removed"}
+    gyro = [line for line in lines if line["source"] == "gyro"]
+    assert [line["axis"] for line in gyro] == ["y1", "y2", "y3"]
+    for line in gyro:
+        assert line["freq_hz"] == pytest.approx(0.4, abs=1e-4)
+        assert line["aliased_freq_hz"] == pytest.approx(1 / 15, abs=1e-4)
+        assert line["amplitude_arcsec_s"] == pytest.approx(3.0 * 2 * np.pi * 0.4, rel=0.1)  # 3" at 0.4 Hz
+    assert all(line["amplitude_arcsec_s"] is None for line in lines if line["source"] == "star_tracker")
+
+
+def test_tables(default_result):
+    sc, result = default_result
+    n = sc.streams["star_tracker"]["time_tai_ns"].size
+    t = result.tables
+    assert {"residuals", "rates", "gyro_comparison", "segments", "spectrum_gyro", "spectrum_star_tracker_rate",
+            "spectrum_star_tracker_residuals"} <= set(t)
+    for name, cols in t.items():
+        lengths = {np.asarray(v).shape for v in cols.values()}
+        assert len(lengths) == 1 and len(next(iter(lengths))) == 1, name
+    res = t["residuals"]
+    assert res["time_tai_ns"].dtype == np.int64 and res["time_tai_ns"].size == n
+    for i in (1, 2, 3):
+        std = np.sqrt(np.mean(res[f"e{i}_corrected_arcsec"] ** 2))
+        assert std < result.summary["sigma_arcsec"][i - 1]  # dof-corrected sigma is above the plain rms
+    assert set(t["rates"]) == {"time_tai_ns", *(f"w{i}_{f}_arcsec_s" for f in "BS" for i in (1, 2, 3))}
+    assert 4.99 < t["spectrum_gyro"]["freq_hz"][-1] <= 5.0  # up to the gyro Nyquist frequency
+
+
+def test_figures_draw(default_result):
+    _, result = default_result
+    figs = JOB.figures(result, JOB.params())
+    assert set(figs) == {"rodrigues_fit", "residuals", "rates", "spectra", "residual_spectra"}
+    for fig in figs.values():
+        assert isinstance(fig, Figure) and fig.get_label()
+        buf = io.BytesIO()
+        fig.savefig(buf, format="png", dpi=40)
+        assert buf.getvalue()[:4] == b"\x89PNG"
+
+
+def test_without_gyro_and_with_manual_harmonics():
+    sc = scenario(seed=5, duration_s=600.0)
+    streams = {"star_tracker": sc.streams["star_tracker"]}
+    result = JOB.run(inputs(sc, streams=streams), JOB.params(harmonics=30), no_progress)
+    s = result.summary
+    assert s["harmonics"] == 30 and s["harmonics_mode"] == "manual" and s["gyro_used"] is False
+    assert "gyro_rate_rms_diff_arcsec_s" not in s and "gyro_comparison" not in result.tables
+    assert s["sigma_arcsec"] == s["sigma_smoothing_arcsec"]
+    assert any("no gyro" in note for note in result.notes)
+    assert set(JOB.figures(result, JOB.params(harmonics=30))) >= {"rates", "spectra"}
+    off = JOB.run(inputs(sc), JOB.params(harmonics=30, use_gyro=False), no_progress)
+    assert off.summary["gyro_used"] is False and any("use_gyro" in note for note in off.notes)
+
+
+def test_sensor_choice_and_errors():
+    sc = scenario(seed=6, duration_s=300.0)
+    st = sc.streams["star_tracker"]
+    two = {k: np.concatenate([v, v]) for k, v in st.items()}
+    two["sensor"] = np.array(["st1"] * st["sensor"].size + ["st2"] * st["sensor"].size, dtype=object)
+    config = {**sc.config, "star_trackers": {"st1": sc.config["star_trackers"]["st1"],
+                                             "st2": {"q_BS": [1.0, 0.0, 0.0, 0.0]}}}
+    with pytest.raises(TaskError, match="ambiguous"):
+        JOB.run(inputs(sc, streams={"star_tracker": two}, config=config), JOB.params(), no_progress)
+    chosen = JOB.run(inputs(sc, streams={"star_tracker": two}, config=config), JOB.params(sensor="st2"),
+                     no_progress)
+    assert chosen.summary["sensor"] == "st2"
+    with pytest.raises(TaskError, match="no mounting q_BS configured for star tracker 'st9'"):
+        JOB.run(inputs(sc), JOB.params(sensor="st9"), no_progress)
+    with pytest.raises(TaskError, match="no star_tracker samples of sensor 'st1'"):
+        JOB.run(inputs(sc, streams={"star_tracker": {**two, "sensor": np.full(two["sensor"].size, "st2", object)}},
+                       config={**sc.config}), JOB.params(), no_progress)
+    short = {k: v[:8] for k, v in st.items()}
+    with pytest.raises(TaskError, match="at least 12"):
+        JOB.run(inputs(sc, streams={"star_tracker": short}), JOB.params(), no_progress)
+    with pytest.raises(TaskError, match="harmonics must be <= N - 2"):
+        JOB.run(inputs(sc, streams={"star_tracker": st}), JOB.params(harmonics=500), no_progress)
