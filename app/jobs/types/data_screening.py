@@ -1,0 +1,194 @@
+"""Job ``data_screening`` (paper 002, eqs. 15-17): flag bad telemetry samples with the reasons.
+
+Thin layer over :func:`processing.screening.screen`. Every sample of the screened streams gets a row in
+the ``flags`` table (accepted, and the ';'-joined names of the criteria that rejected it); nothing is
+deleted. Later jobs run with ``screened = true`` use only the accepted samples (the runner filters their
+inputs with :func:`processing.screening_flags.filter_streams` and the stored ``flags`` table).
+"""
+
+from __future__ import annotations
+
+from typing import Any, Literal
+
+import numpy as np
+from matplotlib.figure import Figure
+from pydantic import BaseModel, ConfigDict, Field
+
+from app.jobs.registry import JobType
+from processing.screening import ScreeningParams, screen
+from processing.screening_flags import flags_table
+from processing.tasks import Progress, TaskError, TaskInputs, TaskResult
+
+NS_PER_S = 1e9
+SCREENABLE = ("gnss", "magnetometer", "panel_currents", "gnss_visibility", "star_tracker", "gyro",
+              "gyro_increments", "sun_sensor", "magnetorquer")
+STATISTIC_CRITERIA = ("energy", "field_magnitude", "panel_eclipse", "panel_sun_norm", "orbit_plane", "velocity")
+"""Criteria whose tested quantity is kept in the ``statistics`` table (and plotted)."""
+
+
+class Params(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    streams: list[Literal["gnss", "magnetometer", "panel_currents", "gnss_visibility", "star_tracker", "gyro",
+                          "gyro_increments", "sun_sensor", "magnetorquer"]] | None = Field(
+        None, description="streams to screen; default: every stream with samples in the window")
+    energy_model: Literal["j2", "two_body"] = Field(
+        "j2", description="energy integral of eq. 15 with the J2 potential (conserved) or two-body (the paper)")
+    use_reference_orbit: bool = Field(True, description="compare the energy with an uploaded reference_orbit")
+    gnss_position_error_m: float = Field(10.0, gt=0, description="dr of eq. 15: receiver position error (1 sigma)")
+    gnss_velocity_error_m_s: float = Field(0.1, gt=0, description="dv of eq. 15: receiver velocity error")
+    k_energy: float = Field(4.0, gt=1, description="k1 of eq. 15")
+    energy_model_error_m2_s2: float | None = Field(
+        None, ge=0, description="model error added to dh (default 300 for j2, 2.5e5 for two_body)")
+    k_plane: float = Field(5.0, gt=1, description="orbit-plane check: k x (dv/v + dr/r)")
+    k_kinematic: float = Field(6.0, gt=1, description="position increments vs integrated velocity")
+    k_velocity: float = Field(6.0, gt=1, description="velocity vs the slope of the positions")
+    magnetometer_error_nT: float = Field(100.0, ge=0, description="dH_instr of eq. 16")
+    field_model_error_nT: float = Field(150.0, ge=0, description="dH_mod of eq. 16 (IGRF-14 in LEO)")
+    k_field: float = Field(3.0, gt=1, description="k2 of eq. 16")
+    current_error_a: float = Field(0.02, ge=0, description="dI_instr of eq. 17")
+    current_model_error_a: float = Field(0.03, ge=0, description="dI_mod of eq. 17 (albedo, temperature)")
+    k_current: float = Field(3.0, gt=1, description="k3 of eq. 17")
+    sun_norm: bool = Field(True, description="eq. 17 without attitude: lit panels must give a unit sun vector")
+    spike_half_window: int = Field(5, ge=2, le=50, description="Hampel window half-width (samples)")
+    k_spike: float = Field(6.0, gt=2, description="Hampel threshold in robust sigmas")
+    stuck_min_run: int = Field(10, ge=3, description="equal consecutive samples that make a stuck run")
+    time_grid_tolerance: float = Field(0.25, gt=0, lt=0.5, description="off-grid tolerance (fraction of period)")
+    max_rate_deg_s: float = Field(5.7, gt=0, description="star tracker without gyro: largest plausible rate")
+    star_tracker_error_arcsec: float = Field(10.0, gt=0, description="star-tracker noise for quaternion jumps")
+
+
+def _screening_params(p: Params) -> ScreeningParams:
+    return ScreeningParams(
+        gnss_position_error_m=p.gnss_position_error_m, gnss_velocity_error_m_s=p.gnss_velocity_error_m_s,
+        k_energy=p.k_energy, energy_model=p.energy_model, energy_model_error_m2_s2=p.energy_model_error_m2_s2,
+        k_plane=p.k_plane, k_kinematic=p.k_kinematic, k_velocity=p.k_velocity,
+        magnetometer_error_nT=p.magnetometer_error_nT, field_model_error_nT=p.field_model_error_nT,
+        k_field=p.k_field, current_error_a=p.current_error_a, current_model_error_a=p.current_model_error_a,
+        k_current=p.k_current, sun_norm=p.sun_norm, spike_half_window=p.spike_half_window, k_spike=p.k_spike,
+        stuck_min_run=p.stuck_min_run, time_grid_tolerance=p.time_grid_tolerance,
+        max_rate_rad_s=float(np.deg2rad(p.max_rate_deg_s)),
+        star_tracker_error_rad=float(np.deg2rad(p.star_tracker_error_arcsec / 3600.0)),
+    )
+
+
+def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
+    present = [s for s in SCREENABLE if s in inputs.streams and len(inputs.streams[s]["time_tai_ns"])]
+    selected = present if params.streams is None else [s for s in params.streams if s in present]
+    if not selected:
+        wanted: list[str] = list(params.streams or SCREENABLE)
+        raise TaskError(f"none of the streams to screen ({', '.join(wanted)}) has samples in the window")
+    notes: list[str] = []
+    if params.streams is not None:
+        absent = sorted(set(params.streams) - set(present))
+        if absent:
+            notes.append(f"no samples of {', '.join(absent)} in the window")
+    reference = None
+    frame = "ITRF"
+    energy_reference = "robust linear fit of the window's own energy"
+    orbit = inputs.reference.get("reference_orbit")
+    if params.use_reference_orbit and orbit is not None:
+        reference = orbit.columns
+        frame = "ITRF" if orbit.details.get("earth_fixed", True) else "GCRF"
+        energy_reference = f"reference orbit {orbit.name} ({orbit.details.get('frame', frame)})"
+    nav_ref = inputs.reference.get("rinex_nav")
+    progress(0.1, "screening")
+    result = screen(inputs.streams, inputs.config, _screening_params(params), reference_orbit=reference,
+                    reference_frame=frame, nav=None if nav_ref is None else nav_ref.columns, selected=selected)
+    notes += result.notes
+    progress(0.7, "flags table")
+    crit = result.summary()
+    total = int(sum(result.n_rows.values()))
+    rejected = int(sum(int(result.rejected(s).sum()) for s in result.n_rows))
+    summary: dict[str, Any] = {
+        "streams": {s: {c: {k: (None if isinstance(v, float) and not np.isfinite(v) else v) for k, v in d.items()}
+                        for c, d in per.items()} for s, per in crit.items()},
+        "n_total": total, "n_rejected": rejected, "rejected_fraction": rejected / total if total else 0.0,
+        "energy_model": params.energy_model, "energy_reference": energy_reference,
+        "navigation_data": None if nav_ref is None else nav_ref.name,
+        "screened_streams": list(result.n_rows),
+    }
+    tables = {"flags": flags_table(result, inputs.streams)}
+    stat_rows: dict[str, list[Any]] = {k: [] for k in ("time_tai_ns", "stream", "criterion", "statistic",
+                                                        "threshold", "flagged")}
+    for c in result.criteria:
+        if c.name not in STATISTIC_CRITERIA:
+            continue
+        rows = np.flatnonzero(c.applied)
+        t = np.asarray(inputs.streams[c.stream]["time_tai_ns"], dtype=np.int64)[rows]
+        if c.stream == "panel_currents" and c.name == "panel_sun_norm":  # one value per epoch
+            t, first = np.unique(t, return_index=True)
+            rows = rows[first]
+        stat_rows["time_tai_ns"].append(t)
+        stat_rows["stream"].append(np.full(rows.size, c.stream, dtype=object))
+        stat_rows["criterion"].append(np.full(rows.size, c.name, dtype=object))
+        stat_rows["statistic"].append(c.statistic[rows])
+        stat_rows["threshold"].append(np.full(rows.size, c.threshold))
+        stat_rows["flagged"].append(c.flagged[rows])
+    if stat_rows["stream"]:
+        tables["statistics"] = {k: np.concatenate(v) for k, v in stat_rows.items()}
+    progress(0.9, "done")
+    return TaskResult(summary=summary, tables=tables, notes=notes)
+
+
+def figures(result: TaskResult, params: Params) -> dict[str, Figure]:
+    flags = result.tables.get("flags")
+    out: dict[str, Figure] = {}
+    if flags is None or len(flags["time_tai_ns"]) == 0:
+        return out
+    t_all = np.asarray(flags["time_tai_ns"], dtype=np.int64)
+    t0 = int(t_all.min())
+    reasons = np.asarray(flags["reasons"]).astype(str)
+    streams = np.asarray(flags["stream"]).astype(str)
+    labels: list[tuple[str, str]] = []
+    for s, per in result.summary["streams"].items():
+        for c, d in per.items():
+            if c != "any" and d["n_rejected"] > 0:
+                labels.append((s, c))
+    fig = Figure(figsize=(10, 1.0 + 0.35 * max(1, len(labels))), label="Rejected samples by stream and criterion")
+    ax = fig.add_subplot()
+    for i, (s, c) in enumerate(labels):
+        sel = (streams == s) & np.char.find(np.char.add(np.char.add(";", reasons), ";"), f";{c};") >= 0
+        ax.plot((t_all[sel] - t0) / NS_PER_S / 60.0, np.full(int(sel.sum()), i), "|", color="tab:red", ms=10)
+    ax.set_yticks(range(len(labels)), [f"{s} / {c}" for s, c in labels])
+    ax.set_ylim(-0.7, max(1, len(labels)) - 0.3)
+    ax.set_xlabel("time since the first sample [min]")
+    ax.set_title("Rejected samples (each mark is a sample; a sample may fail several criteria)")
+    ax.grid(axis="x", alpha=0.3)
+    out["flags_timeline"] = fig
+    stats = result.tables.get("statistics")
+    if stats is not None and len(stats["time_tai_ns"]):
+        crits = [c for c in STATISTIC_CRITERIA if np.any(np.asarray(stats["criterion"]).astype(str) == c)]
+        fig2 = Figure(figsize=(10, 2.4 * len(crits)), label="Criteria of 002 eqs. 15-17 against time")
+        units = {"energy": "|h - h_ref| [m^2/s^2] (eq. 15)", "field_magnitude": "| |H| - |H_model| | [nT] (eq. 16)",
+                 "panel_eclipse": "I - nu I_max [A] (eq. 17, shadow)", "panel_sun_norm": "| |s| - 1 | (eq. 17)",
+                 "orbit_plane": "orbit-normal deviation [rad]", "velocity": "|v - v_fit| [m/s]"}
+        for i, c in enumerate(crits):
+            ax = fig2.add_subplot(len(crits), 1, i + 1)
+            sel = np.asarray(stats["criterion"]).astype(str) == c
+            t = (np.asarray(stats["time_tai_ns"], np.int64)[sel] - t0) / NS_PER_S / 60.0
+            y = np.asarray(stats["statistic"], float)[sel]
+            f = np.asarray(stats["flagged"], bool)[sel]
+            ax.plot(t[~f], y[~f], ".", ms=2, color="tab:blue", label="accepted")
+            ax.plot(t[f], y[f], "x", ms=5, color="tab:red", label="rejected")
+            th = float(np.nanmax(np.asarray(stats["threshold"], float)[sel]))
+            if np.isfinite(th):
+                ax.axhline(th, color="k", lw=0.8, ls="--", label="threshold")
+            if c != "panel_eclipse" and np.isfinite(th) and th > 0:
+                ax.set_yscale("symlog", linthresh=th / 10.0)
+            ax.set_ylabel(units.get(c, c), fontsize=8)
+            ax.grid(alpha=0.3)
+            if i == 0:
+                ax.legend(fontsize=7, loc="upper right")
+        fig2.axes[-1].set_xlabel("time since the first sample [min]")
+        out["criteria"] = fig2
+    return out
+
+
+JOB = JobType(
+    name="data_screening", title="Telemetry screening (002 eqs. 15-17)", paper="002 eqs. 15-17", params=Params,
+    run=run, any_stream=True, figures=figures, reference=("rinex_nav", "reference_orbit"),
+    description="Flags every sample of GNSS, magnetometer, panel-current, visibility and other streams with the "
+                "criteria it fails: energy integral (eq. 15, J2-aware), field magnitude against IGRF-14 (eq. 16), "
+                "panel currents against the shadow/unit-sun models (eq. 17), orbit plane, kinematic and velocity "
+                "consistency, spikes, stuck values and time-grid errors. Nothing is deleted.",
+)
