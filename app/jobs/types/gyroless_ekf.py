@@ -1,0 +1,316 @@
+"""Job ``gyroless_ekf`` (paper 004): attitude and rate of a gyroless spacecraft from magnetometer, sun
+sensor and GNSS, by the EKF of 004 or a multiplicative EKF, with an optional RTS smoother.
+
+Thin layer over :func:`processing.gyroless_estimation.estimate_gyroless_attitude`: picks the sensors and
+their mountings and the inertia from the configuration, converts radians to degrees at the edge,
+builds the summary (consistency statistics instead of errors, since the truth is unknown), the
+attitude/rate and innovation tables, and figures in the spirit of 004 figs. 3-7.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Literal
+
+import numpy as np
+from matplotlib.figure import Figure
+from pydantic import BaseModel, ConfigDict, Field
+
+from app.jobs.registry import JobType
+from processing.gyroless_ekf import FilterTuning
+from processing.gyroless_estimation import GyrolessError, GyrolessResult, GyrolessSettings, estimate_gyroless_attitude
+from processing.tasks import Progress, TaskError, TaskInputs, TaskResult
+
+DEG = 180.0 / np.pi
+NS_PER_S = 1e9
+
+
+class Params(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    filter: Literal["ekf", "mekf"] = Field("mekf", description="ekf: the 9-state EKF of 004; mekf: multiplicative EKF")
+    smoother: bool = Field(True, description="run the Rauch-Tung-Striebel smoother after the filter")
+    magnetometer_noise_nT: float = Field(100.0, gt=0, le=1e5, description="magnetometer noise, 1 sigma per axis")
+    field_model_error_nT: float = Field(0.0, ge=0, le=1e5,
+                                        description="IGRF model error added in quadrature (crustal/external fields)")
+    sun_sensor_noise_deg: float = Field(0.5, gt=0, le=30, description="sun-sensor noise, 1 sigma per axis")
+    torque_noise_N_m: float = Field(4e-6, gt=0, le=1.0,
+                                    description="unmodelled torque, sqrt of its PSD [N m sqrt(s)]")
+    disturbance_walk_N_m: float = Field(1e-7, ge=0, le=1.0,
+                                        description="random walk of the estimated disturbance [N m / sqrt(s)]")
+    initial_angles_deg: tuple[float, float, float] | None = Field(
+        None, description="(roll, pitch, yaw) start instead of the two-vector (TRIAD) solution")
+    initial_attitude_sigma_deg: float = Field(10.0, gt=0, le=180)
+    initial_rate_sigma_rad_s: float = Field(2e-3, gt=0, le=1.0)
+    converged_sigma_deg: float = Field(2.0, gt=0, le=90, description="convergence: 1-sigma attitude bound below this")
+    magnetometer_sensor: str | None = Field(None, description="sensor name; default the only one in the data")
+    sun_sensor_name: str | None = Field(None, description="sun-sensor name; default the only one in the data")
+
+
+def _clean(value: Any) -> Any:
+    """Plain JSON types: numpy scalars/arrays to Python, non-finite floats to None."""
+    if isinstance(value, dict):
+        return {str(k): _clean(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple, np.ndarray)):
+        return [_clean(v) for v in (value.tolist() if isinstance(value, np.ndarray) else value)]
+    if isinstance(value, (np.floating, float)):
+        return float(value) if np.isfinite(value) else None
+    if isinstance(value, (np.integer, np.bool_)):
+        return value.item()
+    return value
+
+
+def _stats(x: np.ndarray) -> dict[str, float]:
+    return {"mean": float(np.mean(x)), "std": float(np.std(x)), "min": float(np.min(x)), "max": float(np.max(x))}
+
+
+def _pick(inputs: TaskInputs, stream: str, requested: str | None) -> dict[str, np.ndarray]:
+    cols = inputs.stream(stream)
+    present = sorted(set(np.asarray(cols["sensor"]).astype(str).tolist()))
+    if requested is None:
+        if len(present) > 1:
+            raise TaskError(f"several {stream} sensors in the data ({present}); set the sensor parameter")
+        requested = present[0]
+    sel = inputs.stream(stream, requested)
+    order = np.argsort(np.asarray(sel["time_tai_ns"], dtype=np.int64), kind="stable")
+    return {k: np.asarray(v)[order] for k, v in sel.items()}
+
+
+def _xyz(cols: dict[str, np.ndarray], names: tuple[str, str, str]) -> np.ndarray:
+    return np.column_stack([np.asarray(cols[n], dtype=float) for n in names])
+
+
+def _intervals(t_ns: np.ndarray, flag: np.ndarray) -> list[dict[str, Any]]:
+    """Contiguous runs where flag is True, as {start_tai_ns, end_tai_ns, duration_s}."""
+    f = np.concatenate([[False], flag, [False]]).astype(np.int8)
+    starts, ends = np.flatnonzero(np.diff(f) == 1), np.flatnonzero(np.diff(f) == -1) - 1
+    return [{"start_tai_ns": int(t_ns[a]), "end_tai_ns": int(t_ns[b]),
+             "duration_s": float((t_ns[b] - t_ns[a]) / NS_PER_S)} for a, b in zip(starts, ends, strict=True)]
+
+
+def _summary(r: GyrolessResult, params: Params) -> dict[str, Any]:
+    t = r.time_tai_ns
+    ts = (t - t[0]) / NS_PER_S
+    conv = r.time_to_converge_s
+    after = ts >= (conv if conv is not None else ts[-1] + 1)
+    sig = r.attitude_sigma_rad * DEG
+    outage = ~r.sun_used
+    ns, wh = r.nis_stats, r.whiteness_stats
+    res = r.filtered.residual_rad * DEG
+
+    def rms(x: np.ndarray) -> float | None:
+        x = x[np.isfinite(x)]
+        return float(np.sqrt(np.mean(x * x))) if x.size else None
+
+    return _clean({
+        "filter": params.filter,
+        "smoother": params.smoother,
+        "n_steps": int(t.size),
+        "step_s": float(np.median(np.diff(ts))) if t.size > 1 else None,
+        "start_tai_ns": int(t[0]),
+        "end_tai_ns": int(t[-1]),
+        "converged": bool(r.converged),
+        "time_to_converge_s": conv,
+        "nis_mean": ns.mean,
+        "nis_dof_mean": ns.mean_dof,
+        "nis_mean_bounds_95": list(ns.mean_bounds),
+        "nis_mean_in_bounds": ns.mean_in_bounds,
+        "nis_fraction_in_95": ns.fraction_in_95,
+        "whiteness": {"max_lag": int(wh.rho.shape[1]) if wh.rho.ndim == 2 else 0, "bound": wh.bound,
+                      "fraction_outside": wh.fraction_outside, "max_abs_rho": wh.max_abs_rho,
+                      "rho": wh.rho},
+        "innovation_rms_deg": {"magnetometer": rms(res[:, 0]), "sun_sensor": rms(res[:, 1])},
+        "roll_deg": _stats(r.roll_rad * DEG),
+        "pitch_deg": _stats(r.pitch_rad * DEG),
+        "yaw_deg": _stats(r.yaw_rad * DEG),
+        "attitude_sigma_deg": {
+            "median": np.median(sig, axis=0).tolist(),
+            "max_after_convergence": (sig[after].max(axis=0).tolist() if np.any(after) else None),
+            "max_in_sun_outage": (sig[outage].max(axis=0).tolist() if np.any(outage) else None),
+            "axes": ["x", "y", "z"],
+        },
+        "rate_sigma_deg_s": {"median": (np.median(r.rate_sigma_rad_s, axis=0) * DEG).tolist()},
+        "disturbance_N_m": {"mean": np.mean(r.tau_d_O_N_m, axis=0).tolist(), "axes": ["x_O", "y_O"]},
+        "sun_used_fraction": float(np.mean(r.sun_used)),
+        "sun_outages": _intervals(t, outage),
+        "counts": r.counts,
+        "artifacts": {"attitude": "attitude series (q_OB, roll/pitch/yaw, 1-sigma, rates, disturbance)",
+                      "innovations": "per-step NIS and residual angles"},
+    })
+
+
+def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
+    cfg = inputs.config
+    inertia = cfg.get("inertia_kg_m2")
+    if inertia is None:
+        raise TaskError("the spacecraft configuration has no inertia_kg_m2 (needed by the 004 dynamics model)")
+    notes: list[str] = []
+    q_BM = (cfg.get("magnetometer") or {}).get("q_BM")
+    q_BS = (cfg.get("sun_sensor") or {}).get("q_BS")
+    if q_BM is None:
+        notes.append("no magnetometer.q_BM configured: magnetometer axes taken as body axes")
+    if q_BS is None:
+        notes.append("no sun_sensor.q_BS configured: sun-sensor axes taken as body axes")
+    progress(0.05, "loading telemetry")
+    mag = _pick(inputs, "magnetometer", params.magnetometer_sensor)
+    sun_cols = inputs.streams.get("sun_sensor")
+    if sun_cols is None or len(sun_cols["time_tai_ns"]) == 0:
+        raise TaskError("no sun_sensor samples in the job window: the filter needs both vectors to start")
+    sun = _pick(inputs, "sun_sensor", params.sun_sensor_name)
+    gnss = _pick(inputs, "gnss", None)
+    tq = inputs.streams.get("magnetorquer")
+    tq_cols = _pick(inputs, "magnetorquer", None) if tq is not None and len(tq["time_tai_ns"]) else None
+    settings = GyrolessSettings(
+        filter=params.filter, smoother=params.smoother, magnetometer_noise_nT=params.magnetometer_noise_nT,
+        field_model_error_nT=params.field_model_error_nT, sun_sensor_noise_deg=params.sun_sensor_noise_deg,
+        initial_angles_deg=params.initial_angles_deg, initial_attitude_sigma_deg=params.initial_attitude_sigma_deg,
+        initial_rate_sigma_rad_s=params.initial_rate_sigma_rad_s, converged_sigma_deg=params.converged_sigma_deg,
+        tuning=FilterTuning(torque_noise_psd_N2_m2_s=params.torque_noise_N_m**2,
+                            disturbance_walk_psd_N2_m2_s=params.disturbance_walk_N_m**2),
+    )
+    progress(0.2, f"{params.filter} filter" + (" and smoother" if params.smoother else ""))
+    try:
+        r = estimate_gyroless_attitude(
+            mag_time_tai_ns=mag["time_tai_ns"], mag_M_nT=_xyz(mag, ("bx", "by", "bz")),
+            sun_time_tai_ns=sun["time_tai_ns"], sun_S=_xyz(sun, ("sx", "sy", "sz")),
+            gnss_time_tai_ns=gnss["time_tai_ns"], gnss_r_E_m=_xyz(gnss, ("x", "y", "z")),
+            gnss_v_E_m_s=_xyz(gnss, ("vx", "vy", "vz")), inertia_kg_m2=inertia,
+            torquer_time_tai_ns=None if tq_cols is None else tq_cols["time_tai_ns"],
+            torquer_mu_B_A_m2=None if tq_cols is None else _xyz(tq_cols, ("mx", "my", "mz")),
+            q_BM=q_BM, q_BS=q_BS, settings=settings,
+        )
+    except (GyrolessError, ValueError) as exc:
+        raise TaskError(str(exc)) from exc
+    progress(0.9, "summary and tables")
+    summary = _summary(r, params)
+    f = r.filtered
+    att = {
+        "time_tai_ns": r.time_tai_ns,
+        **{f"q{i}": r.q_OB[:, i] for i in range(4)},
+        "roll_deg": r.roll_rad * DEG, "pitch_deg": r.pitch_rad * DEG, "yaw_deg": r.yaw_rad * DEG,
+        **{f"sigma_{a}_deg": r.attitude_sigma_rad[:, i] * DEG for i, a in enumerate("xyz")},
+        **{f"w_bi_{a}_rad_s": r.omega_BI_B[:, i] for i, a in enumerate("xyz")},
+        **{f"w_bo_{a}_rad_s": r.omega_BO_B[:, i] for i, a in enumerate("xyz")},
+        **{f"w_sigma_{a}_rad_s": r.rate_sigma_rad_s[:, i] for i, a in enumerate("xyz")},
+        "tau_d_x_N_m": r.tau_d_O_N_m[:, 0], "tau_d_y_N_m": r.tau_d_O_N_m[:, 1],
+        **{f"q_ib_{i}": r.q_IB[:, i] for i in range(4)},
+        "sun_used": r.sun_used.astype(bool),
+    }
+    if r.smoothed is not None:
+        from processing.rigid_body import roll_pitch_yaw_004
+
+        fr, fp, fy = roll_pitch_yaw_004(f.q_OB)
+        att.update({"roll_filtered_deg": fr * DEG, "pitch_filtered_deg": fp * DEG, "yaw_filtered_deg": fy * DEG,
+                    **{f"sigma_{a}_filtered_deg": f.attitude_sigma_rad[:, i] * DEG for i, a in enumerate("xyz")}})
+    innov = {"time_tai_ns": r.time_tai_ns, "nis": r.nis, "nis_dof": r.nis_dof,
+             "magnetometer_residual_deg": f.residual_rad[:, 0] * DEG, "sun_residual_deg": f.residual_rad[:, 1] * DEG}
+    return TaskResult(summary=summary, tables={"attitude": att, "innovations": innov}, notes=notes + r.notes)
+
+
+def _shade_outages(ax: Any, result: TaskResult, t0: int) -> None:
+    for o in result.summary["sun_outages"]:
+        ax.axvspan((o["start_tai_ns"] - t0) / NS_PER_S, (o["end_tai_ns"] - t0) / NS_PER_S, color="0.85", lw=0)
+
+
+def figures(result: TaskResult, params: Params) -> dict[str, Figure]:
+    att = result.tables["attitude"]
+    t0 = int(att["time_tai_ns"][0])
+    ts = (np.asarray(att["time_tai_ns"], dtype=np.int64) - t0) / NS_PER_S
+    out: dict[str, Figure] = {}
+    label = "smoothed" if params.smoother else "filtered"
+
+    fig = Figure(figsize=(10, 7), layout="constrained", label="Attitude angles in the orbital frame (004 figs. 3-7)")
+    axes = fig.subplots(3, 1, sharex=True)
+    for ax, name, sig in zip(axes, ("roll", "pitch", "yaw"), ("x", "y", "z"), strict=True):
+        _shade_outages(ax, result, t0)
+        y, s = np.asarray(att[f"{name}_deg"]), np.asarray(att[f"sigma_{sig}_deg"])
+        if f"{name}_filtered_deg" in att:
+            ax.plot(ts, att[f"{name}_filtered_deg"], color="tab:orange", lw=0.6, label="filtered")
+        ax.plot(ts, y, color="tab:blue", lw=0.8, label=label)
+        ax.fill_between(ts, y - s, y + s, color="tab:blue", alpha=0.25, lw=0, label="±1σ")
+        ax.set_ylabel(f"{name} [deg]")
+        ax.grid(alpha=0.3)
+    axes[0].legend(loc="upper right", fontsize=8)
+    axes[-1].set_xlabel("time since start [s] (grey: no sun sensor)")
+    out["attitude"] = fig
+
+    conv = result.summary.get("time_to_converge_s")
+    start = conv if conv is not None else 0.0
+    m = ts >= start
+    fig = Figure(figsize=(10, 7), layout="constrained", label="Attitude estimation 1-sigma bounds after convergence")
+    axes = fig.subplots(3, 1, sharex=True)
+    for ax, sig in zip(axes, ("x", "y", "z"), strict=True):
+        _shade_outages(ax, result, t0)
+        ax.plot(ts[m], np.asarray(att[f"sigma_{sig}_deg"])[m], color="tab:blue", lw=0.8, label=label)
+        if f"sigma_{sig}_filtered_deg" in att:
+            ax.plot(ts[m], np.asarray(att[f"sigma_{sig}_filtered_deg"])[m], color="tab:orange", lw=0.8,
+                    label="filtered")
+        ax.set_ylabel(f"σ about {sig} [deg]")
+        ax.grid(alpha=0.3)
+    axes[0].legend(loc="upper right", fontsize=8)
+    axes[-1].set_xlabel("time since start [s]")
+    out["attitude_sigma"] = fig
+
+    fig = Figure(figsize=(10, 7), layout="constrained", label="Body rate relative to the orbital frame with ±1σ")
+    axes = fig.subplots(3, 1, sharex=True)
+    for ax, a in zip(axes, "xyz", strict=True):
+        _shade_outages(ax, result, t0)
+        w = np.asarray(att[f"w_bo_{a}_rad_s"]) * DEG
+        s = np.asarray(att[f"w_sigma_{a}_rad_s"]) * DEG
+        ax.plot(ts, w, lw=0.8)
+        ax.fill_between(ts, w - s, w + s, alpha=0.25, lw=0)
+        ax.set_ylabel(f"w_BO {a} [deg/s]")
+        ax.grid(alpha=0.3)
+    axes[-1].set_xlabel("time since start [s]")
+    out["rates"] = fig
+
+    inn = result.tables["innovations"]
+    fig = Figure(figsize=(10, 6), layout="constrained", label="Filter consistency: NIS and innovation whiteness")
+    ax1, ax2 = fig.subplots(2, 1)
+    nis, dof = np.asarray(inn["nis"], dtype=float), np.asarray(inn["nis_dof"], dtype=float)
+    ok = np.isfinite(nis)
+    ax1.plot(ts[ok], nis[ok], ".", ms=1.5, color="0.5", label="NIS")
+    if np.any(ok):
+        from scipy.stats import chi2
+
+        win = max(1, int(round(300 / max(result.summary.get("step_s") or 1.0, 1e-9))))
+        kern = np.ones(win) / win
+        ax1.plot(ts[ok], np.convolve(nis[ok], kern, mode="same"), color="tab:blue", label=f"mean over {win} steps")
+        ax1.plot(ts[ok], chi2.ppf(0.975, dof[ok]), color="tab:red", lw=0.8, label="95 % per step")
+        ax1.plot(ts[ok], dof[ok], color="k", lw=0.8, label="dof")
+    ax1.set_ylabel("NIS")
+    ax1.set_xlabel("time since start [s]")
+    ax1.legend(loc="upper right", fontsize=8)
+    ax1.grid(alpha=0.3)
+    w = result.summary["whiteness"]
+    rho = np.array([[np.nan if v is None else v for v in row] for row in (w.get("rho") or [])], dtype=float)
+    lags = np.arange(1, rho.shape[1] + 1) if rho.ndim == 2 else np.zeros(0)
+    for c in range(rho.shape[0] if rho.ndim == 2 else 0):
+        ax2.plot(lags + 0.1 * c, rho[c], "o", ms=3, label=f"component {c}")
+    ax2.axhline(w["bound"] if w["bound"] is not None else 0, color="tab:red", lw=0.8)
+    ax2.axhline(-(w["bound"] or 0), color="tab:red", lw=0.8)
+    ax2.set_title(f"whitened innovations: {100 * (w['fraction_outside'] or 0):.1f} % of autocorrelations outside "
+                  f"±{w['bound'] or 0:.3f} (lags 1-{w['max_lag']})", fontsize=9)
+    ax2.set_xlabel("lag [steps]")
+    ax2.set_ylabel("autocorrelation")
+    ax2.grid(alpha=0.3)
+    out["consistency"] = fig
+
+    fig = Figure(figsize=(10, 4), layout="constrained", label="Estimated disturbance torque (orbital x, y)")
+    ax = fig.add_subplot()
+    ax.plot(ts, att["tau_d_x_N_m"], label="τd x_O")
+    ax.plot(ts, att["tau_d_y_N_m"], label="τd y_O")
+    ax.set_xlabel("time since start [s]")
+    ax.set_ylabel("N m")
+    ax.legend()
+    ax.grid(alpha=0.3)
+    out["disturbance"] = fig
+    return out
+
+
+JOB = JobType(
+    name="gyroless_ekf", title="Gyroless attitude from magnetometer and sun sensor (EKF)", paper="004",
+    params=Params, run=run, streams=("magnetometer", "sun_sensor", "gnss"), optional_streams=("magnetorquer",),
+    figures=figures,
+    description="Attitude q_OB (orbital frame of 004), rates and in-plane disturbance torque from magnetometer, "
+                "sun sensor and GNSS with the EKF of paper 004 or a multiplicative EKF, plus an RTS smoother; "
+                "reference field IGRF-14, Sun from ERFA; consistency by NIS and innovation whiteness.",
+)

@@ -1,0 +1,98 @@
+"""Consistency measures of a Kalman filter: NIS, innovation whiteness, NEES (Bar-Shalom, Li &
+Kirubarajan, Estimation with Applications to Tracking and Navigation, 2001, §5.4).
+
+- NIS (normalised innovation squared) per update, nu^T S^-1 nu, is chi^2 with m degrees of freedom
+  (m = measurement dimension) when the filter is consistent; its time average over N updates lies
+  in [chi2.ppf(0.025, sum m) / N, chi2.ppf(0.975, sum m) / N] with 95 % probability.
+- Whiteness: the whitened innovations (L^-1 nu, S = L L^T) are independent N(0, 1); their sample
+  autocorrelation at lag l != 0 is within +-1.96 / sqrt(N) with 95 % probability.
+- NEES (normalised estimation error squared) e^T P^-1 e, chi^2 with n degrees of freedom, needs the
+  truth (simulations). A single run's errors are correlated in time, so its per-step values are
+  judged by the fraction inside the per-step 95 % interval (~95 % expected) and its mean by
+  [chi2.ppf(0.025, n), chi2.ppf(0.975, n)] loosely; Monte-Carlo averages give the sharp test.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.stats import chi2
+
+__all__ = ["ChiSquareStats", "WhitenessStats", "chi_square_stats", "nees", "whiteness"]
+
+
+@dataclass(frozen=True)
+class ChiSquareStats:
+    """Statistics of a chi^2-distributed sequence (NIS or NEES): n values used, mean, mean degrees of
+    freedom, the 95 % interval of the time average (independent samples), the fraction of values
+    inside their per-step 95 % interval, and whether the mean lies in its interval."""
+
+    n: int
+    mean: float
+    mean_dof: float
+    mean_bounds: tuple[float, float]
+    fraction_in_95: float
+    mean_in_bounds: bool
+
+
+def chi_square_stats(values: ArrayLike, dof: ArrayLike) -> ChiSquareStats:
+    """Summarise chi^2 values (K,) with their degrees of freedom (K,) (entries with dof <= 0 or NaN skipped)."""
+    v = np.asarray(values, dtype=float)
+    d = np.broadcast_to(np.asarray(dof, dtype=float), v.shape)
+    ok = np.isfinite(v) & (d > 0)
+    v, d = v[ok], d[ok]
+    if v.size == 0:
+        return ChiSquareStats(0, float("nan"), float("nan"), (float("nan"), float("nan")), float("nan"), False)
+    total = float(d.sum())
+    lo, hi = chi2.ppf(0.025, total) / v.size, chi2.ppf(0.975, total) / v.size
+    inside = (v >= chi2.ppf(0.025, d)) & (v <= chi2.ppf(0.975, d))
+    mean = float(v.mean())
+    return ChiSquareStats(n=int(v.size), mean=mean, mean_dof=float(d.mean()), mean_bounds=(float(lo), float(hi)),
+                          fraction_in_95=float(inside.mean()), mean_in_bounds=bool(lo <= mean <= hi))
+
+
+@dataclass(frozen=True)
+class WhitenessStats:
+    """Sample autocorrelation of whitened innovations per component at lags 1..max_lag:
+    rho (components, max_lag) (NaN for components without data), the 95 % bound 1.96/sqrt(N),
+    the fraction of |rho| above it and the largest |rho|."""
+
+    rho: NDArray
+    bound: float
+    fraction_outside: float
+    max_abs_rho: float
+
+
+def whiteness(whitened: ArrayLike, max_lag: int = 20) -> WhitenessStats:
+    """Whiteness of whitened innovation components (K, C) (NaN where absent; each column is treated as
+    one sequence over the steps where it is finite, i.e. gaps are closed)."""
+    w = np.asarray(whitened, dtype=float)
+    if w.ndim == 1:
+        w = w[:, None]
+    rhos = np.full((w.shape[1], max_lag), np.nan)
+    n_min = None
+    for c in range(w.shape[1]):
+        x = w[np.isfinite(w[:, c]), c]
+        if x.size <= 2 * max_lag:
+            continue
+        x = x - x.mean()
+        den = float(x @ x)
+        if den <= 0:
+            continue
+        rhos[c] = [float(x[:-lag] @ x[lag:]) / den for lag in range(1, max_lag + 1)]
+        n_min = x.size if n_min is None else min(n_min, x.size)
+    if n_min is None:
+        return WhitenessStats(rhos, float("nan"), float("nan"), float("nan"))
+    bound = 1.96 / np.sqrt(n_min)
+    finite = rhos[np.isfinite(rhos)]
+    return WhitenessStats(rho=rhos, bound=float(bound), fraction_outside=float(np.mean(np.abs(finite) > bound)),
+                          max_abs_rho=float(np.max(np.abs(finite))))
+
+
+def nees(errors: ArrayLike, covariances: ArrayLike) -> NDArray:
+    """e^T P^-1 e per step for errors (K, n) and covariances (K, n, n). Returns (K,)."""
+    e = np.asarray(errors, dtype=float)
+    P = np.asarray(covariances, dtype=float)
+    return np.einsum("ki,ki->k", e, np.linalg.solve(P, e[..., None])[..., 0])
