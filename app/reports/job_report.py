@@ -1,0 +1,275 @@
+"""Job reports: a JSON document, a self-contained HTML page (figures inline) and its PDF.
+
+One report per job, generic over job types: what was processed (spacecraft, sensors, window, sample
+counts, gaps), with which settings (parameters, reference data, configuration and software versions),
+the summary laid out by :mod:`app.reports.summary`, pass/fail against the spacecraft's specification
+limits (:mod:`app.reports.specs`), sections the job type contributes (:mod:`app.reports.sections`),
+figures and tables; and how to reproduce it (the exact job request and input window).
+"""
+
+from __future__ import annotations
+
+import base64
+import io
+import json
+import urllib.parse
+from pathlib import Path
+from typing import Any
+
+import pyarrow.parquet as pq
+from jinja2 import Environment, FileSystemLoader, select_autoescape
+from sqlalchemy import select
+from sqlalchemy.orm import Session, object_session
+
+from app.jobs.registry import JobType, registry
+from app.jobs.runner import stream_names
+from app.reports import specs as speclib
+from app.reports.inputs import describe_stored_window
+from app.reports.pdf import html_to_pdf
+from app.reports.sections import ReportContext, as_cell, contributed_sections
+from app.reports.summary import iso, layout, wall
+from storage.jobs import ArtifactStore
+from storage.models import Job, ReferenceDataset, Spacecraft, SpacecraftConfig
+from storage.parquet_store import ParquetStore
+
+_env = Environment(loader=FileSystemLoader(Path(__file__).parent / "templates"),
+                   autoescape=select_autoescape(["html"]), trim_blocks=True, lstrip_blocks=True)
+_env.filters["iso"] = iso
+_env.filters["wall"] = wall
+
+
+def pretty_json(value: Any, indent: int = 0) -> str:
+    """JSON with objects one key a line and short lists of numbers or strings on one line."""
+    pad = " " * (indent + 2)
+    if isinstance(value, dict) and value:
+        items = [f"{pad}{json.dumps(str(k))}: {pretty_json(v, indent + 2)}" for k, v in value.items()]
+        return "{\n" + ",\n".join(items) + "\n" + " " * indent + "}"
+    if isinstance(value, list) and value and any(isinstance(v, (dict, list)) for v in value):
+        return "[\n" + ",\n".join(pad + pretty_json(v, indent + 2) for v in value) + "\n" + " " * indent + "]"
+    return json.dumps(value)
+
+
+_env.filters["pretty_json"] = pretty_json
+
+
+def _reference_info(session: Session | None, chosen: dict[str, str]) -> dict[str, Any]:
+    info: dict[str, Any] = {}
+    for kind, dataset_id in chosen.items():
+        d = session.get(ReferenceDataset, dataset_id) if session is not None else None
+        info[kind] = {"id": dataset_id, "name": d.name if d else "(deleted)",
+                      "checksum_sha256": d.checksum_sha256 if d else None}
+    return info
+
+
+def _config(session: Session | None, spacecraft_id: int, version: int | None = None) -> tuple[int | None, Any]:
+    """(version, config) of the given or the latest configuration version."""
+    if session is None:
+        return None, None
+    q = select(SpacecraftConfig.version, SpacecraftConfig.config).where(SpacecraftConfig.spacecraft_id == spacecraft_id)
+    q = q.where(SpacecraftConfig.version == version) if version is not None else q.order_by(
+        SpacecraftConfig.version.desc()).limit(1)
+    row = session.execute(q).first()
+    return (int(row[0]), row[1]) if row else (None, None)
+
+
+def _query(params: dict[str, Any]) -> str:
+    return urllib.parse.urlencode(params, safe=":")
+
+
+def rerun_request(job: Job, sc: Spacecraft, job_type: JobType | None) -> dict[str, Any]:
+    """The ``POST /api/v1/jobs`` body that runs this job again on the same window and settings.
+
+    Times are exact ISO 8601 UTC readings of the stored TAI nanoseconds; reference kinds the job ran
+    without are pinned to "none" so that a newer data set is not picked up.
+    """
+    body: dict[str, Any] = {"type": job.type, "spacecraft": sc.name, "start": iso(job.start_tai_ns),
+                            "end": iso(job.end_tai_ns), "time_scale": "utc", "params": dict(job.params or {})}
+    if job_type is not None and not stream_names(job_type):  # reads no telemetry: the window is the submit time
+        del body["start"], body["end"]
+    kinds = job_type.reference if job_type is not None else tuple(job.reference or {})
+    if kinds:
+        body["reference"] = {k: (job.reference or {}).get(k, "none") for k in kinds}
+    return body
+
+
+def _reproduce(job: Job, sc: Spacecraft, job_type: JobType | None, latest_version: int | None,
+               streams: list[str]) -> dict[str, Any]:
+    body = rerun_request(job, sc, job_type)
+    ui_query = {"type": body["type"], "spacecraft": sc.name, "start": body.get("start", ""),
+                "end": body.get("end", ""), "params": json.dumps(body["params"], sort_keys=True)}
+    if "reference" in body:
+        ui_query["reference"] = json.dumps(body["reference"], sort_keys=True)
+    window = {"start": iso(job.start_tai_ns), "end": iso(job.end_tai_ns)}
+    name = urllib.parse.quote(sc.name, safe="")
+    out: dict[str, Any] = {
+        "endpoint": "POST /api/v1/jobs", "request": body,
+        "ui_url": f"/ui/jobs/new?{_query(ui_query)}",
+        "timeline_url": f"/ui/spacecraft/{name}?{_query(window)}",
+        "input_window": {s: {"api": f"/api/v1/spacecraft/{name}/telemetry/{s}?{_query({**window, 'format': 'csv'})}",
+                             "ui": f"/ui/spacecraft/{name}/telemetry/{s}.csv?{_query(window)}"} for s in streams},
+        "note": None,
+    }
+    if latest_version is not None and latest_version != job.config_version:
+        out["note"] = (f"This job used configuration version {job.config_version}; the spacecraft's configuration "
+                       f"is now version {latest_version}, which a rerun would use.")
+    return out
+
+
+def report_json(job: Job, sc: Spacecraft, job_type: JobType | None, *,
+                telemetry: ParquetStore | None = None) -> dict[str, Any]:
+    """The report as a JSON document (also the data the HTML and PDF are drawn from).
+
+    ``telemetry``: the telemetry store, used to describe the input window of jobs that did not record
+    their input coverage (sample gaps) when they ran.
+    """
+    session = object_session(job)
+    _, config = _config(session, sc.id, job.config_version)
+    latest_version, latest_config = _config(session, sc.id)
+    stored = job.result or {}
+    inputs = stored.get("inputs", {}) or {}
+    coverage: dict[str, Any] = {"source": "job", "streams": stored.get("input_coverage")}
+    if coverage["streams"] is None:
+        coverage = {"source": "unavailable", "streams": {}}
+        if telemetry is not None and session is not None and inputs:
+            coverage = {"source": "store", "streams": describe_stored_window(
+                session, telemetry, sc.id, list(inputs), job.start_tai_ns, job.end_tai_ns)}
+    specifications = speclib.parse(latest_config)
+    checks = speclib.evaluate(job.type, stored.get("summary"), specifications)
+    streams = sorted(set(inputs) | set(job_type.streams if job_type else ()))
+    return {
+        "job": {"id": job.id, "type": job.type, "title": job_type.title if job_type else job.type,
+                "paper": job_type.paper if job_type else "", "description": job_type.description if job_type else "",
+                "status": job.status, "error": job.error, "created_at": job.created_at.isoformat(),
+                "started_at": job.started_at.isoformat() if job.started_at else None,
+                "finished_at": job.finished_at.isoformat() if job.finished_at else None},
+        "spacecraft": sc.name,
+        "window": {"start": iso(job.start_tai_ns), "end": iso(job.end_tai_ns),
+                   "duration_s": (job.end_tai_ns - job.start_tai_ns) / 1e9,
+                   "start_tai_ns": job.start_tai_ns, "end_tai_ns": job.end_tai_ns},
+        "inputs": inputs,
+        "input_coverage": coverage,
+        "parameters": job.params,
+        "reference": _reference_info(session, job.reference or {}),
+        "configuration": {"version": job.config_version, "config": config},
+        "software_version": job.software_version,
+        "summary": stored.get("summary"),
+        "notes": stored.get("notes", []),
+        "specifications": {
+            "configuration_version": latest_version if specifications is not None else None,
+            "verdict": speclib.verdict(checks),
+            "checks": [{"label": c.label, "key": c.key, "unit": c.unit, "components": list(c.components),
+                        "values": list(c.values), "limit": c.limit, "passed": list(c.passed), "ok": c.ok}
+                       for c in checks]},
+        "reproduce": _reproduce(job, sc, job_type, latest_version, streams),
+        "artifacts": [{"name": a.name, "kind": a.kind, "media_type": a.media_type, "size_bytes": a.size_bytes,
+                       "description": a.description, "url": f"/api/v1/jobs/{job.id}/artifacts/{a.name}"}
+                      for a in job.artifacts],
+    }
+
+
+def _png(fig: Any) -> bytes:
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=110, bbox_inches="tight")
+    return buf.getvalue()
+
+
+def _sections(data: dict[str, Any], job: Job, store: ArtifactStore, job_type: JobType | None,
+              figure_files: dict[str, bytes]) -> tuple[list[dict[str, Any]], list[str], set[str]]:
+    """Rendered contributed sections, problems, and the stored figure names they placed."""
+    if job_type is None or data["summary"] is None:
+        return [], [], set()
+    try:
+        params: Any = job_type.params.model_validate(job.params)
+    except ValueError:
+        params = dict(job.params)
+    by_name = {a.name: a for a in job.artifacts}
+
+    def load_table(name: str) -> bytes | None:
+        art = by_name.get(f"{name}.parquet")
+        path = store.path(art) if art is not None else None
+        return path.read_bytes() if path is not None and path.is_file() else None
+
+    ctx = ReportContext(job_type=job.type, summary=data["summary"], params=params,
+                        config=data["configuration"]["config"] or {},
+                        specifications=speclib.parse(_config(object_session(job), job.spacecraft_id)[1]),
+                        load_table=load_table)
+    sections, problems = contributed_sections(job_type, ctx)
+    placed: set[str] = set()
+    out = []
+    for s in sections:
+        figs = []
+        for name in s.figure_names:
+            if f"{name}.png" in figure_files:
+                figs.append({"title": by_name[f"{name}.png"].description or name,
+                             "data": base64.b64encode(figure_files[f"{name}.png"]).decode()})
+                placed.add(f"{name}.png")
+        for name, fig in s.figures.items():
+            figs.append({"title": str(fig.get_label() or name), "data": base64.b64encode(_png(fig)).decode()})
+        out.append({"title": s.title, "paragraphs": list(s.paragraphs), "figures": figs,
+                    "tables": [{"title": t.title, "caption": t.caption, "columns": list(t.columns),
+                                "rows": [[as_cell(v) for v in r] for r in t.rows]} for t in s.tables]})
+    return out, problems, placed
+
+
+def _table_info(job: Job, store: ArtifactStore) -> list[dict[str, Any]]:
+    names = {a.name: a for a in job.artifacts}
+    out = []
+    for a in job.artifacts:
+        if a.kind != "table" or not a.name.endswith(".parquet"):
+            continue
+        stem = a.name[: -len(".parquet")]
+        path = store.path(a)
+        rows = cols = None
+        if path.is_file():
+            meta = pq.read_schema(path)
+            cols = list(meta.names)
+            rows = pq.read_metadata(path).num_rows
+        out.append({"name": stem, "rows": rows, "columns": cols or [], "parquet": a.name,
+                    "csv": f"{stem}.csv" if f"{stem}.csv" in names else None})
+    return out
+
+
+def render_html(data: dict[str, Any], job: Job, store: ArtifactStore, *, ui: bool = False,
+                for_print: bool = False) -> str:
+    """The self-contained HTML report. ``ui``: with the web UI's navigation; ``for_print``: for the PDF."""
+    job_type = registry().get(job.type)
+    figure_files: dict[str, bytes] = {}
+    for a in job.artifacts:
+        if a.kind == "figure" and a.media_type == "image/png":
+            path = store.path(a)
+            if path.is_file():
+                figure_files[a.name] = path.read_bytes()
+    sections, problems, placed = _sections(data, job, store, job_type, figure_files)
+    descriptions = {a.name: a.description for a in job.artifacts}
+    figures = [{"name": name, "title": descriptions.get(name) or name, "data": base64.b64encode(png).decode()}
+               for name, png in figure_files.items() if name not in placed]
+    return _env.get_template("job_report.html").render(
+        d=data, summary=layout(data["summary"]), sections=sections, problems=problems, figures=figures,
+        tables=_table_info(job, store), ui=ui, for_print=for_print, job_id=job.id)
+
+
+def _facts(data: dict[str, Any]) -> list[tuple[str, str]]:
+    """Key facts of a report as text lines (for the PDF drawn without Chromium)."""
+    facts = [("Spacecraft", data["spacecraft"]), ("Job", f"{data['job']['id']} ({data['job']['status']})"),
+             ("Window (UTC)", f"{data['window']['start']} .. {data['window']['end']}"),
+             ("Inputs", "; ".join(f"{s}: " + ", ".join(f"{k} {n}" for k, n in v.items())
+                                  for s, v in data["inputs"].items()) or "none"),
+             ("Parameters", json.dumps(data["parameters"])),
+             ("Configuration version", str(data["configuration"]["version"])),
+             ("Software version", data["software_version"]),
+             ("Specification", data["specifications"]["verdict"])]
+    if data["job"]["error"]:
+        facts.append(("Error", data["job"]["error"]))
+    lay = layout(data["summary"])
+    facts += lay.scalars + [(k, "[" + ", ".join(v) + "]") for k, v in lay.vectors]
+    facts += [(k, ", ".join(f"{s}={x}" for s, x in v.items())) for k, v in lay.stats]
+    return facts
+
+
+def render_pdf(data: dict[str, Any], job: Job, store: ArtifactStore) -> bytes:
+    """The report as PDF (Chromium's print of the HTML report; see app.reports.pdf)."""
+    html = render_html(data, job, store, for_print=True)
+    figures = [(a.description or a.name, store.path(a).read_bytes()) for a in job.artifacts
+               if a.kind == "figure" and a.media_type == "image/png" and store.path(a).is_file()]
+    pdf, _engine = html_to_pdf(html, f"{data['job']['title']} — {data['spacecraft']}", _facts(data), figures)
+    return pdf

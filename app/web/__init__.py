@@ -1,0 +1,12 @@
+"""The web UI (server-rendered pages under /ui): see app/web/routes.py and app/web/job_pages.py."""
+
+from __future__ import annotations
+
+from fastapi import APIRouter
+
+from app.web import job_pages, routes
+
+router = APIRouter()
+router.include_router(routes.root_router)
+router.include_router(job_pages.router)
+router.include_router(routes.router)

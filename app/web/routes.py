@@ -1,0 +1,269 @@
+"""Web UI pages: sign-in, spacecraft list, per spacecraft coverage timeline, uploads and trends.
+
+Server-rendered (Jinja2), a little JavaScript for live job status (static/app.js), no build step.
+Every page checks the caller exactly as the API does: the same roles (viewer reads, operator uploads
+and runs jobs) and the same spacecraft grants, through the API's own lookup functions.
+"""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import io
+import urllib.parse
+from typing import Annotated, Any
+
+import numpy as np
+from fastapi import APIRouter, File, Form, HTTPException, Request, UploadFile, status
+from fastapi.concurrency import run_in_threadpool
+from fastapi.responses import FileResponse, HTMLResponse, RedirectResponse, Response
+from sqlalchemy import func, select
+from sqlalchemy.orm import Session
+
+from app.api.deps import Principal, SessionDep, StoreDep
+from app.api.routes.spacecraft import get_spacecraft, latest_config
+from app.api.routes.telemetry import (
+    TooManyRows,
+    get_stream,
+    ingest_upload,
+    read_telemetry,
+)
+from app.ingest.errors import UploadError
+from app.ingest.formats import decoders
+from app.ingest.parse import UnsupportedMediaType
+from app.ingest.validate import UploadOptions
+from app.jobs.registry import registry
+from app.reports import specs as speclib
+from app.reports import trends as trendlib
+from app.web import timeline
+from app.web.auth import (
+    COOKIE,
+    COOKIE_PATH,
+    WebOperator,
+    WebViewer,
+    check_form,
+    check_same_site,
+    principal_from_secret,
+)
+from app.web.render import STATIC, HtmlRoute, page
+from processing import timescales
+from processing.streams import STREAMS
+from storage.models import Ingest, Job, Spacecraft, TelemetryFile
+from storage.telemetry import ConflictError, IngestMeta
+
+router = APIRouter(prefix="/ui", route_class=HtmlRoute, include_in_schema=False)
+root_router = APIRouter(include_in_schema=False)
+
+STATIC_FILES = {"app.css": "text/css; charset=utf-8", "app.js": "text/javascript; charset=utf-8"}
+EXTENSION_TYPES = {".csv": "text/csv", ".parquet": "application/vnd.apache.parquet",
+                   ".pq": "application/vnd.apache.parquet", ".arrow": "application/vnd.apache.arrow.stream",
+                   ".arrows": "application/vnd.apache.arrow.stream", ".json": "application/json"}
+TIME_SCALES = ("utc", "tai", "gps", "tt")
+
+
+@root_router.get("/")
+def root() -> RedirectResponse:
+    return RedirectResponse("/ui/", status_code=303)
+
+
+@router.get("/static/{name}")
+def static(name: str) -> FileResponse:
+    if name not in STATIC_FILES:
+        raise HTTPException(status.HTTP_404_NOT_FOUND, f"no static file {name!r}")
+    return FileResponse(STATIC / name, media_type=STATIC_FILES[name], headers={"Cache-Control": "max-age=300"})
+
+
+def _safe_next(target: str | None) -> str:
+    """Only local UI paths are followed after sign-in (no open redirects)."""
+    if target and target.startswith("/ui/") and not target.startswith("//") and "\\" not in target:
+        return target
+    return "/ui/"
+
+
+@router.get("/login")
+def login_form(request: Request, next: str | None = None) -> HTMLResponse:
+    return page(request, "login.html", next=_safe_next(next), error=None)
+
+
+@router.post("/login")
+def login(request: Request, api_key: Annotated[str, Form()] = "",
+          next: Annotated[str | None, Form()] = None) -> Response:
+    check_same_site(request)
+    secret = api_key.strip()
+    principal = principal_from_secret(request, secret) if secret else None
+    if principal is None:
+        return page(request, "login.html", status_code=401, next=_safe_next(next),
+                    error="This API key is not valid (unknown, expired or revoked).")
+    response = RedirectResponse(_safe_next(next), status_code=303)
+    response.set_cookie(COOKIE, secret, path=COOKIE_PATH, httponly=True, samesite="lax",
+                        secure=request.url.scheme == "https")
+    return response
+
+
+@router.post("/logout")
+def logout(request: Request) -> RedirectResponse:
+    check_same_site(request)
+    response = RedirectResponse("/ui/login", status_code=303)
+    response.delete_cookie(COOKIE, path=COOKIE_PATH, httponly=True, samesite="lax",
+                           secure=request.url.scheme == "https")
+    return response
+
+
+def visible_spacecraft(session: Session, who: Principal) -> list[Spacecraft]:
+    return [sc for sc in session.scalars(select(Spacecraft).order_by(Spacecraft.name)) if who.may_use(sc.id)]
+
+
+@router.get("/")
+def index(request: Request, session: SessionDep, who: WebViewer) -> HTMLResponse:
+    rows = []
+    for sc in visible_spacecraft(session, who):
+        streams = session.execute(
+            select(TelemetryFile.stream, func.min(TelemetryFile.t_min_tai_ns), func.max(TelemetryFile.t_max_tai_ns),
+                   func.sum(TelemetryFile.rows)).where(TelemetryFile.spacecraft_id == sc.id)
+            .group_by(TelemetryFile.stream).order_by(TelemetryFile.stream)).all()
+        last_job = session.scalar(select(Job).where(Job.spacecraft_id == sc.id)
+                                  .order_by(Job.created_at.desc()).limit(1))
+        n_jobs = session.scalar(select(func.count(Job.id)).where(Job.spacecraft_id == sc.id)) or 0
+        rows.append({"name": sc.name, "config_version": latest_config(session, sc).version,
+                     "streams": [{"stream": s, "first": int(a), "last": int(b), "rows": int(n or 0)}
+                                 for s, a, b, n in streams],
+                     "n_jobs": n_jobs, "last_job": last_job})
+    return page(request, "index.html", spacecraft=rows)
+
+
+def parse_time(value: str | None, field: str) -> int | None:
+    """ISO 8601 UTC (or seconds since 1970 UTC) to TAI ns; None for empty."""
+    if value is None or not value.strip():
+        return None
+    text = value.strip()
+    try:
+        try:
+            seconds = float(text)
+        except ValueError:
+            return int(timescales.iso_to_tai_ns(np.array([text], dtype=object), "utc")[0])
+        return int(timescales.seconds_to_tai_ns(np.array([seconds]), "utc")[0])
+    except timescales.TimeValueError as exc:
+        raise HTTPException(422, f"{field}: {exc}") from None
+
+
+@router.get("/spacecraft/{name}")
+def spacecraft_page(request: Request, name: str, session: SessionDep, who: WebViewer, start: str | None = None,
+                    end: str | None = None, uploaded: str | None = None) -> HTMLResponse:
+    sc = get_spacecraft(session, name, who)
+    cfg = latest_config(session, sc)
+    t0, t1 = parse_time(start, "start"), parse_time(end, "end")
+    if t0 is not None and t1 is not None and t1 <= t0:
+        raise HTTPException(422, "end must be after start")
+    tl = timeline.build(session, sc.id, t0, t1)
+    ingests = list(session.scalars(select(Ingest).where(Ingest.spacecraft_id == sc.id)
+                                   .order_by(Ingest.created_at.desc()).limit(20)))
+    jobs = [(j, sc.name) for j in session.scalars(select(Job).where(Job.spacecraft_id == sc.id)
+                                                   .order_by(Job.created_at.desc()).limit(20))]
+    just_uploaded = session.get(Ingest, uploaded) if uploaded else None
+    if just_uploaded is not None and just_uploaded.spacecraft_id != sc.id:
+        just_uploaded = None
+    return page(request, "spacecraft.html", sc=sc, config=cfg, specs=speclib.parse(cfg.config), timeline=tl,
+                ingests=ingests, jobs=jobs, streams=list(STREAMS), formats=sorted(decoders()),
+                time_scales=TIME_SCALES, view_start=start or "", view_end=end or "", uploaded=just_uploaded,
+                job_types=sorted(registry().values(), key=lambda j: j.name))
+
+
+@router.get("/spacecraft/{name}/telemetry/{stream}.csv")
+def telemetry_csv(name: str, stream: str, session: SessionDep, store: StoreDep, who: WebViewer,
+                  start: str | None = None, end: str | None = None, sensor: str | None = None) -> Response:
+    """The stored samples of one stream in a window, as the API's CSV download."""
+    return read_telemetry(name=name, stream=stream, session=session, store=store, who=who, start=start, end=end,
+                          format="csv", time_scale="utc", time_format="iso", sensor=sensor)
+
+
+def _content_type(upload: UploadFile) -> str:
+    filename = (upload.filename or "").lower()
+    for ext, media in EXTENSION_TYPES.items():
+        if filename.endswith(ext):
+            return media
+    return upload.content_type or "application/octet-stream"
+
+
+@router.post("/spacecraft/{name}/upload")
+async def upload(request: Request, name: str, session: SessionDep, store: StoreDep, who: WebOperator,
+                 stream: Annotated[str, Form()], file: Annotated[UploadFile, File()],
+                 csrf: Annotated[str | None, Form()] = None, time_scale: Annotated[str, Form()] = "utc",
+                 sensor: Annotated[str | None, Form()] = None,
+                 quaternion_direction: Annotated[str, Form()] = "sensor_to_inertial",
+                 format: Annotated[str | None, Form()] = None) -> Response:
+    """The upload form: the same validation and all-or-nothing ingest as the API's upload route."""
+    check_form(request, csrf)
+    spec = get_stream(stream)
+    sc = get_spacecraft(session, name, who)
+    config = latest_config(session, sc).config
+    if time_scale not in TIME_SCALES:
+        raise HTTPException(422, f"time_scale must be one of {', '.join(TIME_SCALES)}")
+    body = await file.read()
+    content_type = _content_type(file)
+    meta = IngestMeta(filename=(file.filename or "")[:255] or None,
+                      content_type=content_type[:100], size_bytes=len(body),
+                      checksum_sha256=hashlib.sha256(body).hexdigest(), time_scale=time_scale, api_key_id=who.key_id)
+    opts = UploadOptions(time_scale=time_scale, sensor=(sensor or "").strip() or None, norm_tolerance=1e-3,
+                         quaternion_direction=quaternion_direction,
+                         n_panels=len(config.get("solar_panels", [])) or None)
+    context: dict[str, Any] = {"sc": sc, "stream": stream, "filename": file.filename}
+    try:
+        rec, _notes = await run_in_threadpool(
+            ingest_upload, session, store, sc, spec, body, content_type, opts, meta, config,
+            (format or None) if format != "table" else None, request.app.state.settings.max_upload_rows)
+    except TooManyRows as exc:
+        return page(request, "upload_result.html", status_code=413, message=str(exc), errors=[], **context)
+    except UnsupportedMediaType as exc:
+        return page(request, "upload_result.html", status_code=415, message=str(exc), errors=[], **context)
+    except UploadError as exc:
+        return page(request, "upload_result.html", status_code=422,
+                    message=f"upload rejected, nothing stored: {exc}",
+                    errors=[e.as_dict() for e in exc.errors], **context)
+    except ConflictError as exc:
+        return page(request, "upload_result.html", status_code=409,
+                    message=f"upload rejected, nothing stored: {exc.total} rows differ from stored samples with "
+                            "the same identity (sensor, time)", errors=[], conflicts=exc.rows, **context)
+    target = f"/ui/spacecraft/{urllib.parse.quote(sc.name, safe='')}?{urllib.parse.urlencode({'uploaded': rec.id})}"
+    return RedirectResponse(target + "#uploads", status_code=303)
+
+
+def _trend_selection(session: Session, sc: Spacecraft, job_type: str | None, start: str | None,
+                     end: str | None) -> tuple[list[trendlib.Trend], list[str]]:
+    t0, t1 = parse_time(start, "start"), parse_time(end, "end")
+    available = sorted(session.scalars(select(Job.type).where(Job.spacecraft_id == sc.id,
+                                                              Job.status == "succeeded").distinct()))
+    if job_type:
+        jobs = trendlib.succeeded_jobs(session, sc.id, [job_type], start_tai_ns=t0, end_tai_ns=t1)
+        metrics = trendlib.generic_metrics(job_type, jobs)
+    else:
+        metrics = list(trendlib.KEY_METRICS)
+        jobs = trendlib.succeeded_jobs(session, sc.id, {m.job_type for m in metrics}, start_tai_ns=t0, end_tai_ns=t1)
+    specs = speclib.parse(latest_config(session, sc).config)
+    return trendlib.trends(jobs, metrics, specs), available
+
+
+@router.get("/spacecraft/{name}/trends")
+def trends_page(request: Request, name: str, session: SessionDep, who: WebViewer, type: str | None = None,
+                start: str | None = None, end: str | None = None) -> HTMLResponse:
+    sc = get_spacecraft(session, name, who)
+    selected, available = _trend_selection(session, sc, type or None, start, end)
+    figures = [{"title": t.metric.title, "unit": t.metric.unit, "key": t.metric.key, "job_type": t.metric.job_type,
+                "png": trendlib.figure_png_b64(t), "n": len(t.points)} for t in selected]
+    query = urllib.parse.urlencode({k: v for k, v in (("type", type), ("start", start), ("end", end)) if v})
+    return page(request, "trends.html", sc=sc, figures=figures, rows=trendlib.rows(selected), available=available,
+                selected_type=type or "", view_start=start or "", view_end=end or "", csv_query=query)
+
+
+@router.get("/spacecraft/{name}/trends.csv")
+def trends_csv(name: str, session: SessionDep, who: WebViewer, type: str | None = None, start: str | None = None,
+               end: str | None = None) -> Response:
+    sc = get_spacecraft(session, name, who)
+    selected, _ = _trend_selection(session, sc, type or None, start, end)
+    buf = io.StringIO()
+    fields = ["job_id", "job_type", "series", "window_start", "window_end", "metric", "component", "value", "unit"]
+    writer = csv.DictWriter(buf, fieldnames=fields, lineterminator="\n")
+    writer.writeheader()
+    writer.writerows(trendlib.rows(selected))
+    return Response(buf.getvalue(), media_type="text/csv",
+                    headers={"Content-Disposition": f'attachment; filename="{sc.name}_trends.csv"',
+                             "Cache-Control": "no-store"})

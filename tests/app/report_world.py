@@ -1,0 +1,153 @@
+"""Simulated spacecraft with every job type run once: shared by the report and browser tests.
+
+Seed-003 (Meteor-M: star tracker, gyros, GNSS) and seed-004 (gyroless microsatellite: magnetometer,
+sun sensor, GNSS, magnetorquers) telemetry with known truth is uploaded; every registered job type runs
+with its default parameters on the first spacecraft that has the streams it needs, so new job types
+are covered as soon as they are registered.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+from collections.abc import Iterable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from app.jobs.registry import JobType, registry
+from processing import timescales
+from processing.simulate.seed003 import simulate_seed003
+
+START_ISO = "2023-06-01T00:00:00Z"
+START = int(timescales.iso_to_tai_ns([START_ISO])[0])
+DURATION_S = 600.0
+SEED = 3
+SPACECRAFT = "meteor-sim"
+# Limits loose enough for the simulated sensors, plus a generic one that fails on purpose (the
+# simulation has star-tracker gaps), so every report shows both PASS and FAIL rows where they apply.
+SPECIFICATIONS = {
+    "star_tracker_sigma_arcsec": [10.0, 10.0, 40.0],
+    "gyro_bias_max_deg_h": [20.0, 20.0, 20.0],
+    "orbital_attitude_deg": {"pitch": [-1.0, 1.0], "yaw": [-2.0, 3.0], "roll": [-1.0, 1.0]},
+    "limits": [{"job_type": "telemetry_coverage", "key": "n_gaps", "max": 0, "label": "gaps in the window"}],
+}
+# Summary keys that legitimately differ between two runs of the same job.
+VOLATILE_KEYS = {"worker_pid"}
+
+
+def output_dir(*parts: str) -> Path:
+    """Where tests leave artifacts for people (screenshots, PDF pages): $ATTITUDE_TEST_OUTPUT or var/test-output."""
+    root = Path(os.environ.get("ATTITUDE_TEST_OUTPUT") or Path(__file__).resolve().parents[2] / "var" / "test-output")
+    path = root.joinpath(*parts)
+    path.mkdir(parents=True, exist_ok=True)
+    return path
+
+
+GYROLESS = "microsat-sim"
+SMALLSAT = "smallsat-sim"
+# Job types that belong to one scenario's paper even where another spacecraft has the streams they need.
+PREFERRED = {"data_screening": SMALLSAT, "vector_attitude": SMALLSAT, "gyroless_ekf": GYROLESS}
+
+
+def scenario() -> Any:
+    return simulate_seed003(start_tai_ns=START, duration_s=DURATION_S, seed=SEED)
+
+
+def scenarios() -> dict[str, Any]:
+    """Spacecraft name -> simulated scenario (``streams``, ``config``, ``truth``), the seed-003 one first."""
+    from processing.simulate.seed004 import simulate_seed004
+
+    worlds = {SPACECRAFT: scenario(), GYROLESS: simulate_seed004(start_tai_ns=START, duration_s=DURATION_S, seed=4)}
+    from tests.shared_data import GNSS_NAV
+
+    nav = GNSS_NAV / "brdc2800.15n"
+    if nav.is_file():  # paper 002: magnetometer, panel currents, GNSS visibility from the real ephemerides
+        from processing.formats.rinex_nav import parse_rinex_nav_reference
+        from processing.simulate.seed002 import simulate_seed002
+
+        worlds[SMALLSAT] = simulate_seed002(nav=parse_rinex_nav_reference(nav.read_bytes()).columns, seed=2,
+                                            duration_s=DURATION_S)
+    return worlds
+
+
+def config_with_specs(config: dict[str, Any]) -> dict[str, Any]:
+    return {**config, "specifications": SPECIFICATIONS}
+
+
+def runnable(job_types: Iterable[JobType], streams: Iterable[str]) -> tuple[list[str], dict[str, str]]:
+    """(types to run, {type: why it is skipped}) for the simulated streams."""
+    present = set(streams)
+    run, skipped = [], {}
+    for jt in sorted(job_types, key=lambda j: j.name):
+        missing = [s for s in jt.streams if s not in present]
+        if missing:
+            skipped[jt.name] = f"needs {', '.join(missing)}, which the simulation does not provide"
+        else:
+            run.append(jt.name)
+    return run, skipped
+
+
+def assign(job_types: Iterable[JobType], worlds: dict[str, Any]) -> tuple[dict[str, str], dict[str, str]]:
+    """({job type: the first spacecraft with the streams it needs}, {job type: why none has them})."""
+    where: dict[str, str] = {}
+    skipped: dict[str, str] = {}
+    types = list(job_types)
+    for name, sim in worlds.items():
+        run, _ = runnable(types, sim.streams)
+        for t in run:
+            if PREFERRED.get(t, name) == name or PREFERRED.get(t) not in worlds:
+                where.setdefault(t, name)
+    for jt in types:
+        if jt.name not in where:
+            skipped[jt.name] = (f"needs {', '.join(jt.streams)}, which no simulated spacecraft "
+                                f"({', '.join(worlds)}) provides")
+    return where, skipped
+
+
+def all_type_names() -> list[str]:
+    return sorted(registry())
+
+
+def strip_volatile(summary: Any) -> Any:
+    if isinstance(summary, dict):
+        return {k: strip_volatile(v) for k, v in summary.items() if k not in VOLATILE_KEYS}
+    if isinstance(summary, list):
+        return [strip_volatile(v) for v in summary]
+    return summary
+
+
+def png_ink_fraction(png_path: Path) -> float:
+    """Share of pixels that are not (near) white: 0 for a blank page."""
+    from matplotlib.image import imread
+
+    img = np.asarray(imread(png_path))
+    rgb = img[..., :3].astype(float)
+    if rgb.max() > 1.0:
+        rgb = rgb / 255.0
+    return float(np.mean(rgb.min(axis=-1) < 0.9))
+
+
+def ensure_tools(tools: dict[str, str]) -> str | None:
+    """Install the Debian packages of missing binaries ({binary: package}); None when all are there,
+    else why they could not be had (the caller skips with that message)."""
+    missing = {b: p for b, p in tools.items() if shutil.which(b) is None}
+    if not missing:
+        return None
+    packages = sorted(set(missing.values()))
+    if shutil.which("apt-get") is None or os.geteuid() != 0:
+        return (f"{', '.join(missing)} not installed and cannot be installed here (needs root and apt-get): "
+                f"apt-get install {' '.join(packages)}")
+    env = {**os.environ, "DEBIAN_FRONTEND": "noninteractive"}
+    install = ["apt-get", "install", "-y", "-qq", "--no-install-recommends", *packages]
+    with open(output_dir() / "apt-get.log", "ab") as log:
+        if subprocess.run(install, env=env, stdout=log, stderr=log, timeout=1200).returncode != 0:
+            subprocess.run(["apt-get", "update", "-qq"], env=env, stdout=log, stderr=log, timeout=600)
+            subprocess.run(install, env=env, stdout=log, stderr=log, timeout=1200)
+    still = [b for b in missing if shutil.which(b) is None]
+    if still:
+        return (f"installing {' '.join(packages)} failed ({', '.join(still)} still missing); "
+                f"see {output_dir()}/apt-get.log")
+    return None

@@ -1,0 +1,33 @@
+"""Who may use each web UI route (tests/web/test_web_access.py checks every entry).
+
+A table of its own so that the API's access test can leave these routes to the web test:
+``(method, path) -> (role, scope)``; scope "global", "spacecraft" (the path or form names one),
+"list" (results filtered by the key's spacecraft grants).
+"""
+
+from __future__ import annotations
+
+PUBLIC = "public"
+WEB_ACCESS: dict[tuple[str, str], tuple[str, str]] = {
+    ("GET", "/"): (PUBLIC, PUBLIC),
+    ("GET", "/ui/static/{name}"): (PUBLIC, PUBLIC),
+    ("GET", "/ui/login"): (PUBLIC, PUBLIC),
+    ("POST", "/ui/login"): (PUBLIC, PUBLIC),
+    ("POST", "/ui/logout"): (PUBLIC, PUBLIC),
+    ("GET", "/ui/"): ("viewer", "list"),
+    ("GET", "/ui/spacecraft/{name}"): ("viewer", "spacecraft"),
+    ("GET", "/ui/spacecraft/{name}/telemetry/{stream}.csv"): ("viewer", "spacecraft"),
+    ("POST", "/ui/spacecraft/{name}/upload"): ("operator", "spacecraft"),
+    ("GET", "/ui/spacecraft/{name}/trends"): ("viewer", "spacecraft"),
+    ("GET", "/ui/spacecraft/{name}/trends.csv"): ("viewer", "spacecraft"),
+    ("GET", "/ui/jobs"): ("viewer", "list"),
+    ("GET", "/ui/jobs/status"): ("viewer", "list"),
+    ("GET", "/ui/jobs/new"): ("operator", "global"),
+    ("POST", "/ui/jobs"): ("operator", "spacecraft"),
+    ("GET", "/ui/jobs/{job_id}"): ("viewer", "spacecraft"),
+    ("POST", "/ui/jobs/{job_id}/cancel"): ("operator", "spacecraft"),
+    ("GET", "/ui/jobs/{job_id}/report"): ("viewer", "spacecraft"),
+    ("GET", "/ui/jobs/{job_id}/report.pdf"): ("viewer", "spacecraft"),
+    ("GET", "/ui/jobs/{job_id}/report.json"): ("viewer", "spacecraft"),
+    ("GET", "/ui/jobs/{job_id}/artifacts/{name}"): ("viewer", "spacecraft"),
+}
