@@ -8,6 +8,7 @@ are covered as soon as they are registered.
 
 from __future__ import annotations
 
+import fcntl
 import os
 import shutil
 import subprocess
@@ -98,10 +99,14 @@ def assign(job_types: Iterable[JobType], worlds: dict[str, Any]) -> tuple[dict[s
     for name, sim in worlds.items():
         run, _ = runnable(types, sim.streams)
         for t in run:
-            if PREFERRED.get(t, name) == name or PREFERRED.get(t) not in worlds:
+            if PREFERRED.get(t, name) == name:
                 where.setdefault(t, name)
     for jt in types:
-        if jt.name not in where:
+        if jt.name in where:
+            continue
+        if PREFERRED.get(jt.name) is not None:  # its paper's scenario could not be simulated here
+            skipped[jt.name] = f"its scenario ({PREFERRED[jt.name]}) is not simulated here (shared GNSS data missing?)"
+        else:
             skipped[jt.name] = (f"needs {', '.join(jt.streams)}, which no simulated spacecraft "
                                 f"({', '.join(worlds)}) provides")
     return where, skipped
@@ -142,10 +147,16 @@ def ensure_tools(tools: dict[str, str]) -> str | None:
                 f"apt-get install {' '.join(packages)}")
     env = {**os.environ, "DEBIAN_FRONTEND": "noninteractive"}
     install = ["apt-get", "install", "-y", "-qq", "--no-install-recommends", *packages]
+    # Parallel test workers may all get here: one installs while the others wait on the lock.
     with open(output_dir() / "apt-get.log", "ab") as log:
-        if subprocess.run(install, env=env, stdout=log, stderr=log, timeout=1200).returncode != 0:
-            subprocess.run(["apt-get", "update", "-qq"], env=env, stdout=log, stderr=log, timeout=600)
-            subprocess.run(install, env=env, stdout=log, stderr=log, timeout=1200)
+        fcntl.flock(log, fcntl.LOCK_EX)
+        try:
+            if any(shutil.which(b) is None for b in missing):
+                if subprocess.run(install, env=env, stdout=log, stderr=log, timeout=1200).returncode != 0:
+                    subprocess.run(["apt-get", "update", "-qq"], env=env, stdout=log, stderr=log, timeout=600)
+                    subprocess.run(install, env=env, stdout=log, stderr=log, timeout=1200)
+        finally:
+            fcntl.flock(log, fcntl.LOCK_UN)
     still = [b for b in missing if shutil.which(b) is None]
     if still:
         return (f"installing {' '.join(packages)} failed ({', '.join(still)} still missing); "

@@ -254,8 +254,8 @@ def test_contributed_sections_render_in_html_and_failures_do_not_break_the_repor
                                          title="Per axis"),),
             figure_names=("coverage",), figures={"samples": fig})]
 
-    with_hook = types.SimpleNamespace(**{f: getattr(real, f) for f in real.__dataclass_fields__},
-                                      report_sections=report_sections)
+    with_hook = types.SimpleNamespace(**{**{f: getattr(real, f) for f in real.__dataclass_fields__},
+                                         "report_sections": report_sections})
     monkeypatch.setattr(job_report, "registry", lambda: {"telemetry_coverage": with_hook})
     html = world.client.get(f"/api/v1/jobs/{job['id']}/report").text
     assert drawn == [1.5]
