@@ -5,17 +5,19 @@ from __future__ import annotations
 import io
 import json
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pyarrow as pa
 import pyarrow.csv as pacsv
 import pyarrow.parquet as pq
-from matplotlib.figure import Figure
 
 from processing import timescales
 from processing.tasks import TaskResult
 from storage.jobs import ArtifactStore, StoredArtifact
+
+if TYPE_CHECKING:  # matplotlib is imported by the job types, not at start-up
+    from matplotlib.figure import Figure
 
 
 def jsonable(value: Any) -> Any:

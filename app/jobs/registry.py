@@ -9,12 +9,14 @@ from __future__ import annotations
 import importlib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from matplotlib.figure import Figure
 from pydantic import BaseModel
 
 from processing.tasks import Progress, TaskInputs, TaskResult
+
+if TYPE_CHECKING:  # the job types import matplotlib when the registry is first read, not at start-up
+    from matplotlib.figure import Figure
 
 
 @dataclass(frozen=True)

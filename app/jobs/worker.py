@@ -12,6 +12,7 @@ from app.jobs import runner
 from app.settings import Settings
 
 matplotlib.use("Agg")
+_registry.registry()  # the forkserver preloads every job type once, so each job starts without imports
 
 
 def run(job_id: str, settings: Settings) -> None:

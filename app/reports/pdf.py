@@ -20,10 +20,6 @@ import threading
 from collections.abc import Sequence
 from pathlib import Path
 
-from matplotlib.backends.backend_pdf import PdfPages
-from matplotlib.figure import Figure
-from matplotlib.image import imread
-
 log = logging.getLogger("attitude.reports")
 
 CHROMIUM_NAMES = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable")
@@ -74,6 +70,11 @@ def chromium_pdf(html: str, chromium: str, timeout_s: float = TIMEOUT_S) -> byte
 
 def fallback_pdf(title: str, facts: Sequence[tuple[str, str]], figures: Sequence[tuple[str, bytes]]) -> bytes:
     """A plain PDF without Chromium: a title page of facts and one page per figure (PNG bytes)."""
+    # matplotlib's PDF backend is imported here, not at start-up: only this fallback needs it.
+    from matplotlib.backends.backend_pdf import PdfPages
+    from matplotlib.figure import Figure
+    from matplotlib.image import imread
+
     buf = io.BytesIO()
     with PdfPages(buf) as pdf:
         lines: list[str] = []

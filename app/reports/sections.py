@@ -24,14 +24,16 @@ import io
 import logging
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pyarrow.parquet as pq
-from matplotlib.figure import Figure
 from numpy.typing import NDArray
 
 from app.reports.specs import Specifications
+
+if TYPE_CHECKING:  # matplotlib is imported by the job types, not at start-up
+    from matplotlib.figure import Figure
 
 log = logging.getLogger("attitude.reports")
 

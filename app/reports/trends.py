@@ -13,10 +13,9 @@ import io
 import math
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from matplotlib.figure import Figure
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
@@ -24,6 +23,9 @@ from app.reports.specs import PPM, RAD_ARCSEC, RAD_S_DEG_H, Specifications, look
 from app.reports.summary import flatten_numbers, iso
 from processing import timescales
 from storage.models import Job
+
+if TYPE_CHECKING:  # matplotlib is imported when a trend is drawn, not at start-up
+    from matplotlib.figure import Figure
 
 MAX_JOBS = 1000
 
@@ -201,6 +203,8 @@ def _dates(tai_ns: Sequence[int]) -> np.ndarray:
 def figure(trend: Trend) -> Figure:
     """One trend: a line per component (and sensor), dashed red lines at the specification limits."""
     m = trend.metric
+    from matplotlib.figure import Figure
+
     fig = Figure(figsize=(9, 3.2), label=m.title)
     ax = fig.add_subplot()
     series = sorted({p.series for p in trend.points})
