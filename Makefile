@@ -18,8 +18,11 @@ lint: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/mypy app storage
 
+# Test files are spread over TEST_WORKERS processes (a file stays on one worker: module fixtures are built once).
+TEST_WORKERS ?= 2
+
 test: lint
-	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 $(BIN)/python -m pytest
+	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 $(BIN)/python -m pytest -n $(TEST_WORKERS) --dist loadfile
 
 demo: $(STAMP)
 	$(BIN)/python -m app.demo
