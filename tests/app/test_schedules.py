@@ -165,11 +165,14 @@ def test_two_instances_every_minute_for_five_minutes_give_five_runs(settings, sp
         make_spacecraft(a)
         clock = FastClock(speed)
         a.app.state.scheduler.clock = b.app.state.scheduler.clock = clock
+        # Created disabled: at 20x a minute of the fast clock passes in 3 s, so an enabled schedule could fire
+        # its first (real-clock) tick before the next lines move it to the fast clock's next minute.
         s = a.post("/api/v1/schedules", json={"name": "every-minute", "cron": "* * * * *", "type": "executor_check",
-                                              "spacecraft": "sat1", "window": "previous"}).json()
+                                              "spacecraft": "sat1", "window": "previous", "enabled": False}).json()
         first = next_tick("* * * * *", clock())
         with a.app.state.sessions.begin() as session:  # start counting at the first whole minute of the fast clock
-            session.get(Schedule, s["id"]).next_fire_at = first
+            schedule = session.get(Schedule, s["id"])
+            schedule.next_fire_at, schedule.enabled = first, True
         stop_at = first + dt.timedelta(minutes=4, seconds=30)
         while clock() < stop_at:
             time.sleep(0.05)
