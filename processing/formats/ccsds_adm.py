@@ -39,6 +39,7 @@ from processing.formats.ccsds_kvn import (
     format_float,
     parse_epochs,
     parse_floats,
+    read_block,
     time_scale,
     tokenize,
 )
@@ -192,19 +193,10 @@ def parse_aem(text: str | bytes) -> Aem:
     """Read an AEM (KVN, 1.0 or 2.0) into :class:`Aem`; AemError (a ValueError) names what is wrong."""
     lines = list(tokenize(text))
     version = _version(lines)
-    header: dict[str, str] = {"CCSDS_AEM_VERS": version}
-    header_comments: list[str] = []
+    head, i = read_block(lines, 1, "META_START", HEADER_KEYS, "the AEM header", AemError, unique=False)
+    header: dict[str, str] = {"CCSDS_AEM_VERS": version, **head.values}
+    header_comments = head.comments
     segments: list[AemSegment] = []
-    i = 1
-    while i < len(lines) and lines[i].key != "META_START":
-        ln = lines[i]
-        if ln.kind == "comment":
-            header_comments.append(ln.value)
-        elif ln.kind == "kv" and ln.key in HEADER_KEYS:
-            header[ln.key] = ln.value
-        else:
-            raise AemError(f"line {ln.number}: unexpected {ln.text[:60]!r} in the AEM header")
-        i += 1
     for key in ("CREATION_DATE", "ORIGINATOR"):
         if key not in header:
             raise AemError(f"the AEM header lacks the mandatory {key}")
@@ -212,22 +204,9 @@ def parse_aem(text: str | bytes) -> Aem:
         if lines[i].key != "META_START":
             raise AemError(f"line {lines[i].number}: expected META_START, got {lines[i].text[:60]!r}")
         start_line = lines[i].number
-        i += 1
-        meta: dict[str, str] = {}
-        meta_lines: dict[str, int] = {}
-        comments: list[str] = []
-        while i < len(lines) and lines[i].key != "META_STOP":
-            ln = lines[i]
-            if ln.kind == "comment":
-                comments.append(ln.value)
-            elif ln.kind == "kv" and ln.key in METADATA_KEYS:
-                if ln.key in meta:
-                    raise AemError(f"line {ln.number}: {ln.key} given twice in one metadata block")
-                meta[ln.key] = ln.value
-                meta_lines[ln.key] = ln.number
-            else:
-                raise AemError(f"line {ln.number}: unexpected {ln.text[:60]!r} in AEM metadata")
-            i += 1
+        block, i = read_block(lines, i + 1, "META_STOP", METADATA_KEYS, "the AEM metadata block", AemError,
+                              unique=True)
+        meta, meta_lines, comments = block.values, block.line_of, block.comments
         if i >= len(lines):
             raise AemError(f"metadata block at line {start_line}: no META_STOP")
         i += 1

@@ -68,6 +68,39 @@ def tokenize(text: str | bytes) -> Iterator[Line]:
             yield Line(number, "data", "", s, s)
 
 
+@dataclass
+class Block:
+    """The keyword lines of a header or metadata block: values, the line of each keyword, comments."""
+
+    values: dict[str, str]
+    line_of: dict[str, int]
+    comments: list[str]
+
+
+def read_block(lines: list[Line], i: int, stop: str, keys: Iterable[str], what: str,
+               error: type[ValueError], *, unique: bool) -> tuple[Block, int]:
+    """Read ``KEY = VALUE`` and COMMENT lines from ``lines[i]`` up to the line whose key is ``stop``.
+
+    Returns the block and the index of the ``stop`` line (``len(lines)`` when it never comes). A line
+    that is neither a comment nor one of ``keys`` raises ``error`` naming the line and ``what`` (e.g.
+    "the OEM header"); with ``unique`` a keyword given twice does too (else the last one counts)."""
+    allowed = set(keys)
+    block = Block({}, {}, [])
+    while i < len(lines) and lines[i].key != stop:
+        ln = lines[i]
+        if ln.kind == "comment":
+            block.comments.append(ln.value)
+        elif ln.kind == "kv" and ln.key in allowed:
+            if unique and ln.key in block.values:
+                raise error(f"line {ln.number}: {ln.key} given twice in {what}")
+            block.values[ln.key] = ln.value
+            block.line_of[ln.key] = ln.number
+        else:
+            raise error(f"line {ln.number}: unexpected {ln.text[:60]!r} in {what}")
+        i += 1
+    return block, i
+
+
 def time_scale(time_system: str, where: str) -> str:
     """Our scale name of a CCSDS TIME_SYSTEM; KvnError for the ones not supported."""
     key = time_system.strip().upper()

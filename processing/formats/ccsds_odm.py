@@ -29,6 +29,7 @@ from processing.formats.ccsds_kvn import (
     format_float,
     parse_epochs,
     parse_floats,
+    read_block,
     time_scale,
     tokenize,
 )
@@ -151,18 +152,9 @@ def parse_oem(text: str | bytes) -> Oem:
     version = lines[0].value
     if version not in ("1.0", "2.0", "3.0"):
         raise OemError(f"line {lines[0].number}: CCSDS_OEM_VERS {version!r} is not supported (2.0, 3.0)")
-    header = {"CCSDS_OEM_VERS": version}
-    header_comments: list[str] = []
-    i = 1
-    while i < len(lines) and lines[i].key != "META_START":
-        ln = lines[i]
-        if ln.kind == "comment":
-            header_comments.append(ln.value)
-        elif ln.kind == "kv" and ln.key in HEADER_KEYS:
-            header[ln.key] = ln.value
-        else:
-            raise OemError(f"line {ln.number}: unexpected {ln.text[:60]!r} in the OEM header")
-        i += 1
+    head, i = read_block(lines, 1, "META_START", HEADER_KEYS, "the OEM header", OemError, unique=False)
+    header = {"CCSDS_OEM_VERS": version, **head.values}
+    header_comments = head.comments
     for key in ("CREATION_DATE", "ORIGINATOR"):
         if key not in header:
             raise OemError(f"the OEM header lacks the mandatory {key}")
@@ -172,20 +164,9 @@ def parse_oem(text: str | bytes) -> Oem:
             raise OemError(f"line {lines[i].number}: expected META_START, got {lines[i].text[:60]!r}")
         start_line = lines[i].number
         where = f"segment at line {start_line}"
-        i += 1
-        meta: dict[str, str] = {}
-        comments: list[str] = []
-        while i < len(lines) and lines[i].key != "META_STOP":
-            ln = lines[i]
-            if ln.kind == "comment":
-                comments.append(ln.value)
-            elif ln.kind == "kv" and ln.key in METADATA_KEYS:
-                if ln.key in meta:
-                    raise OemError(f"line {ln.number}: {ln.key} given twice in one metadata block")
-                meta[ln.key] = ln.value
-            else:
-                raise OemError(f"line {ln.number}: unexpected {ln.text[:60]!r} in OEM metadata")
-            i += 1
+        block, i = read_block(lines, i + 1, "META_STOP", METADATA_KEYS, "the OEM metadata block", OemError,
+                              unique=True)
+        meta, comments = block.values, block.comments
         if i >= len(lines):
             raise OemError(f"{where}: no META_STOP")
         i += 1
