@@ -23,7 +23,6 @@ stale-heartbeat reaper of any instance.
 from __future__ import annotations
 
 import logging
-import threading
 import time
 from dataclasses import dataclass
 from typing import Any, Protocol
@@ -31,6 +30,7 @@ from typing import Any, Protocol
 from sqlalchemy import select, update
 from sqlalchemy.orm import Session, sessionmaker
 
+from app.jobs.dispatch import CANCEL_GRACE_S, CatalogDispatcher
 from app.settings import Settings
 from storage import jobs as jobstore
 from storage.jobs import ArtifactStore
@@ -38,7 +38,6 @@ from storage.models import Job, utcnow
 
 log = logging.getLogger("attitude.executor.dask")
 
-CANCEL_GRACE_S = 3.0
 
 
 class Executor(Protocol):
@@ -88,58 +87,38 @@ def _is_worker_loss(exc: BaseException | None) -> bool:
         exc is not None and "lost" in str(exc).lower())
 
 
-class DaskExecutor:
+class DaskExecutor(CatalogDispatcher[_InFlight]):
     """Dispatch catalog-queued jobs to a Dask cluster; ``client`` may be given (tests, benchmarks)."""
+
+    thread_name = "dask-job-dispatcher"
 
     def __init__(self, settings: Settings, sessions: sessionmaker[Session], client: Any = None,
                  poll_s: float = 0.1, max_in_flight: int | None = None) -> None:
-        self.settings = settings
-        self.sessions = sessions
-        self.poll_s = poll_s
+        super().__init__(settings, sessions, poll_s)
         self._client = client
         self._own_client = client is None
         self._max_in_flight = max_in_flight
-        self._wake = threading.Event()
-        self._stop = threading.Event()
-        self._running: dict[str, _InFlight] = {}
-        self._thread: threading.Thread | None = None
-        self._last_reap = 0.0
 
     @property
     def client(self) -> Any:
         return self._client
 
-    def start(self) -> None:
+    def _connect(self) -> None:
         if self._client is None:
             from distributed import Client
 
             if not self.settings.dask_address:
                 raise ValueError("the Dask executor needs ATTITUDE_DASK_ADDRESS")
             self._client = Client(self.settings.dask_address, set_as_default=False, timeout="30s")
-        with self.sessions.begin() as session:
-            failed = jobstore.fail_stale(session, self.settings.heartbeat_timeout_s,
-                                         "the service stopped while the job was running")
-        if failed:
-            log.warning("marked %d interrupted jobs as failed", len(failed))
-        self._thread = threading.Thread(target=self._loop, name="dask-job-dispatcher", daemon=True)
-        self._thread.start()
 
-    def wake(self) -> None:
-        self._wake.set()
-
-    def stop(self) -> None:
-        self._stop.set()
-        self._wake.set()
-        if self._thread is not None:
-            self._thread.join(timeout=30)
-        for job_id, run in list(self._running.items()):
-            run.future.cancel()
-            self._end(job_id, "failed", "the service shut down while the job was running", cancel_task=True)
-        self._running.clear()
+    def _disconnect(self) -> None:
         if self._own_client and self._client is not None:
             self._client.close()
 
-    # -- dispatcher -------------------------------------------------------------------------------
+    def _abandon(self, job_id: str, run: _InFlight) -> None:
+        run.future.cancel()
+        self._end(job_id, "failed", "the service shut down while the job was running", cancel_task=True)
+
     def capacity(self) -> int:
         """Jobs kept in flight: the configured maximum, or twice the cluster's worker threads."""
         if self._max_in_flight is not None:
@@ -150,42 +129,16 @@ class DaskExecutor:
             return len(self._running)
         return max(self.settings.max_jobs, 2 * threads)
 
-    def _loop(self) -> None:
-        while not self._stop.is_set():
-            try:
-                self._tick()
-            except Exception:  # noqa: BLE001 - the dispatcher must survive a database or network hiccup
-                log.exception("Dask job dispatcher iteration failed")
-            self._wake.wait(self.poll_s)
-            self._wake.clear()
+    def _launch(self, job_id: str) -> None:
+        try:
+            self._submit(job_id, 1)
+        except Exception as exc:  # noqa: BLE001 - e.g. the scheduler is unreachable
+            self._end(job_id, "failed", f"could not submit the job to the Dask cluster: {exc}")
 
     def _submit(self, job_id: str, attempt: int) -> None:
         future = self._client.submit(run_job, job_id, self.settings, key=f"attitude-job-{job_id}-{attempt}",
                                      pure=False, retries=0)
         self._running[job_id] = _InFlight(future, time.monotonic(), attempt)
-
-    def _tick(self) -> None:
-        self._supervise()
-        free = self.capacity() - len(self._running)
-        if free > 0:
-            with self.sessions() as session:
-                candidates = jobstore.queued_ids(session, free)
-            for job_id in candidates:
-                with self.sessions.begin() as session:
-                    claimed = jobstore.claim(session, job_id)
-                if not claimed:
-                    continue
-                try:
-                    self._submit(job_id, 1)
-                except Exception as exc:  # noqa: BLE001 - e.g. the scheduler is unreachable
-                    self._end(job_id, "failed", f"could not submit the job to the Dask cluster: {exc}")
-        now = time.monotonic()
-        if now - self._last_reap > max(1.0, self.settings.heartbeat_timeout_s / 4):
-            self._last_reap = now
-            with self.sessions.begin() as session:
-                jobstore.heartbeat(session, list(self._running))
-                jobstore.fail_stale(session, self.settings.heartbeat_timeout_s,
-                                    "the job's worker stopped sending heartbeats (service or worker died)")
 
     def _supervise(self) -> None:
         if not self._running:

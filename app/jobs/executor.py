@@ -9,10 +9,8 @@ Running jobs whose heartbeat stopped (their service died) are failed by the peri
 
 from __future__ import annotations
 
-import logging
 import multiprocessing as mp
 import os
-import threading
 import time
 from dataclasses import dataclass, field
 from multiprocessing.process import BaseProcess
@@ -21,14 +19,11 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session, sessionmaker
 
 from app.jobs import worker
+from app.jobs.dispatch import CANCEL_GRACE_S, CatalogDispatcher
 from app.settings import Settings
 from storage import jobs as jobstore
 from storage.jobs import ArtifactStore
 from storage.models import Job
-
-log = logging.getLogger("attitude.executor")
-
-CANCEL_GRACE_S = 3.0
 
 
 @dataclass
@@ -39,84 +34,31 @@ class _Running:
     killed_reason: str | None = field(default=None)
 
 
-class LocalExecutor:
+class LocalExecutor(CatalogDispatcher[_Running]):
     def __init__(self, settings: Settings, sessions: sessionmaker[Session], poll_s: float = 0.25) -> None:
-        self.settings = settings
-        self.sessions = sessions
-        self.poll_s = poll_s
-        self._wake = threading.Event()
-        self._stop = threading.Event()
-        self._running: dict[str, _Running] = {}
-        self._thread: threading.Thread | None = None
+        super().__init__(settings, sessions, poll_s)
         # One BLAS thread per job process: jobs already run side by side (max_jobs), and oversubscribed
         # OpenBLAS threads made small QR factorisations 5-10x slower on a busy 2-core machine.
         os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
         os.environ.setdefault("OMP_NUM_THREADS", "1")
         self._ctx = mp.get_context("forkserver")
-        self._ctx.set_forkserver_preload(["app.jobs.worker"])
-        self._last_reap = 0.0
+        self._ctx.set_forkserver_preload(["app.jobs.worker", "app.jobs.preload"])
 
-    def start(self) -> None:
-        with self.sessions.begin() as session:
-            failed = jobstore.fail_stale(session, self.settings.heartbeat_timeout_s,
-                                         "the service stopped while the job was running")
-        if failed:
-            log.warning("marked %d interrupted jobs as failed", len(failed))
-        self._thread = threading.Thread(target=self._loop, name="job-dispatcher", daemon=True)
-        self._thread.start()
-
-    def wake(self) -> None:
-        self._wake.set()
-
-    def stop(self) -> None:
-        self._stop.set()
-        self._wake.set()
-        if self._thread is not None:
-            self._thread.join(timeout=30)
-        for job_id, run in list(self._running.items()):
-            run.process.kill()
-            run.process.join(5)
-            self._after_exit(job_id, run, "the service shut down while the job was running")
-        self._running.clear()
-
-    # -- dispatcher -------------------------------------------------------------------------------
-    def _loop(self) -> None:
-        while not self._stop.is_set():
-            try:
-                self._tick()
-            except Exception:  # noqa: BLE001 - the dispatcher must survive a database hiccup
-                log.exception("job dispatcher iteration failed")
-            self._wake.wait(self.poll_s)
-            self._wake.clear()
-
-    def _tick(self) -> None:
-        self._supervise()
-        free = self.settings.max_jobs - len(self._running)
-        if free > 0:
-            with self.sessions() as session:
-                candidates = jobstore.queued_ids(session, free)
-            for job_id in candidates:
-                with self.sessions.begin() as session:
-                    claimed = jobstore.claim(session, job_id)
-                if not claimed:
-                    continue
-                proc = self._ctx.Process(target=worker.run, args=(job_id, self.settings),
-                                         name=f"job-{job_id}", daemon=False)
-                try:
-                    proc.start()
-                except Exception as exc:  # noqa: BLE001
-                    with self.sessions.begin() as session:
-                        jobstore.set_status(session, job_id, "failed", allowed_from=("running",),
-                                            stage="failed", error=f"could not start a worker process: {exc}")
-                    continue
-                self._running[job_id] = _Running(proc, time.monotonic())
-        now = time.monotonic()
-        if now - self._last_reap > max(1.0, self.settings.heartbeat_timeout_s / 4):
-            self._last_reap = now
+    def _launch(self, job_id: str) -> None:
+        proc = self._ctx.Process(target=worker.run, args=(job_id, self.settings), name=f"job-{job_id}", daemon=False)
+        try:
+            proc.start()
+        except Exception as exc:  # noqa: BLE001
             with self.sessions.begin() as session:
-                jobstore.heartbeat(session, list(self._running))
-                jobstore.fail_stale(session, self.settings.heartbeat_timeout_s,
-                                    "the job's worker stopped sending heartbeats (service or worker died)")
+                jobstore.set_status(session, job_id, "failed", allowed_from=("running",),
+                                    stage="failed", error=f"could not start a worker process: {exc}")
+            return
+        self._running[job_id] = _Running(proc, time.monotonic())
+
+    def _abandon(self, job_id: str, run: _Running) -> None:
+        run.process.kill()
+        run.process.join(5)
+        self._after_exit(job_id, run, "the service shut down while the job was running")
 
     def _supervise(self) -> None:
         if not self._running:
