@@ -258,6 +258,47 @@ class _FilterBase:
         stats.whitened = w.tolist()
         return M.T @ w, self.P - M.T @ M
 
+    def update(
+        self,
+        b_B: ArrayLike | None,
+        b_O: ArrayLike,
+        sigma_b: float,
+        s_B: ArrayLike | None = None,
+        s_O: ArrayLike | None = None,
+        sigma_s: float = math.nan,
+    ) -> _UpdateStats:
+        """Fuse unit vectors b (field) and s (Sun); either may be None (skipped). 004 eq. (4).
+
+        Each filter gives the rows of H and the residuals of one vector (``_vector_rows``) and applies
+        the correction to its state (``_correct``)."""
+        stats = _UpdateStats()
+        rows: list[list[float]] = []
+        res: list[float] = []
+        var: list[float] = []
+        cols = dcm_BO_columns(self.q)
+        for meas, ref, sig, tag in ((b_B, b_O, sigma_b, "mag"), (s_B, s_O, sigma_s, "sun")):
+            if meas is None or ref is None:
+                continue
+            h, r = self._vector_rows(cols, meas, ref)
+            rows.extend(h)
+            res.extend(r)
+            stats.residual_rad[tag == "sun"] = math.sqrt(sum(x * x for x in r))
+            var.extend([sig * sig] * len(r))
+            stats.dof += 2
+            setattr(stats, "used_sun" if tag == "sun" else "used_mag", True)
+        if not rows:
+            return stats
+        dx, P = self._gain(np.array(rows), np.array(res), var, stats)
+        self.P = P
+        self._correct(dx.tolist())
+        return stats
+
+    def _vector_rows(self, cols: tuple, meas: ArrayLike, ref: ArrayLike) -> tuple[list[list[float]], list[float]]:
+        raise NotImplementedError  # pragma: no cover - overridden
+
+    def _correct(self, d: list[float]) -> None:
+        raise NotImplementedError  # pragma: no cover - overridden
+
     def attitude_cov(self) -> NDArray:  # pragma: no cover - overridden
         raise NotImplementedError
 
@@ -326,43 +367,20 @@ class GyrolessEKF(_FilterBase):
         rows.append([0.0] * 9)
         return np.array(rows)
 
-    def update(
-        self,
-        b_B: ArrayLike | None,
-        b_O: ArrayLike,
-        sigma_b: float,
-        s_B: ArrayLike | None = None,
-        s_O: ArrayLike | None = None,
-        sigma_s: float = math.nan,
-    ) -> _UpdateStats:
-        """Fuse unit vectors b (field) and s (Sun); either may be None (skipped). 004 eq. (4)."""
-        stats = _UpdateStats()
-        rows, res, var = [], [], []
-        cols = dcm_BO_columns(self.q)
+    def _vector_rows(self, cols: tuple, meas: ArrayLike, ref: ArrayLike) -> tuple[list[list[float]], list[float]]:
+        """Three rows of H (d(R(q) ref)/dq) and the residual meas - R(q) ref of one unit vector (004 eq. 4)."""
+        r = (float(ref[0]), float(ref[1]), float(ref[2]))  # type: ignore[index]
+        pred = _rotate_BO(cols, r)
         z4 = [0.0, 0.0, 0.0]
-        for meas, ref, sig, tag in ((b_B, b_O, sigma_b, "mag"), (s_B, s_O, sigma_s, "sun")):
-            if meas is None or ref is None:
-                continue
-            r = (float(ref[0]), float(ref[1]), float(ref[2]))  # type: ignore[index]
-            pred = _rotate_BO(cols, r)
-            for i, d in enumerate(_dcm_v_dq(self.q, r)):
-                rows.append([*z4, *d, 0.0, 0.0])
-                res.append(float(meas[i]) - pred[i])  # type: ignore[index]
-            stats.residual_rad[tag == "sun"] = math.sqrt(res[-1] ** 2 + res[-2] ** 2 + res[-3] ** 2)
-            var.extend([sig * sig] * 3)
-            stats.dof += 2
-            setattr(stats, "used_sun" if tag == "sun" else "used_mag", True)
-        if not rows:
-            return stats
-        dx, P = self._gain(np.array(rows), np.array(res), var, stats)
-        self.P = P
-        d = dx.tolist()
+        rows = [[*z4, *d, 0.0, 0.0] for d in _dcm_v_dq(self.q, r)]
+        return rows, [float(meas[i]) - pred[i] for i in range(3)]  # type: ignore[index]
+
+    def _correct(self, d: list[float]) -> None:
         q0, q1, q2, q3 = (a + b for a, b in zip(self.q, d[3:7], strict=True))
         nn = math.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)  # normalised after the update (004)
         self.q = (q0 / nn, q1 / nn, q2 / nn, q3 / nn)
         self.w = (self.w[0] + d[0], self.w[1] + d[1], self.w[2] + d[2])
         self.tau = (self.tau[0] + d[7], self.tau[1] + d[8])
-        return stats
 
     def attitude_cov(self) -> NDArray:
         """Covariance (3, 3) [rad^2] of the attitude error dtheta (in B): 4 Xi^T P_qq Xi."""
@@ -443,37 +461,15 @@ class GyrolessMEKF(_FilterBase):
             self._q_cache[dt] = q
         return q
 
-    def update(
-        self,
-        b_B: ArrayLike | None,
-        b_O: ArrayLike,
-        sigma_b: float,
-        s_B: ArrayLike | None = None,
-        s_O: ArrayLike | None = None,
-        sigma_s: float = math.nan,
-    ) -> _UpdateStats:
-        """Fuse unit vectors b (field) and s (Sun); either may be None (skipped)."""
-        stats = _UpdateStats()
-        rows, res, var = [], [], []
-        cols = dcm_BO_columns(self.q)
-        for meas, ref, sig, tag in ((b_B, b_O, sigma_b, "mag"), (s_B, s_O, sigma_s, "sun")):
-            if meas is None or ref is None:
-                continue
-            pred = _rotate_BO(cols, ref)
-            e1, e2 = _tangent_basis(pred)
-            mx, my, mz = float(meas[0]), float(meas[1]), float(meas[2])  # type: ignore[index]
-            res.extend([e1[0] * mx + e1[1] * my + e1[2] * mz, e2[0] * mx + e2[1] * my + e2[2] * mz])
-            stats.residual_rad[tag == "sun"] = math.sqrt(res[-1] ** 2 + res[-2] ** 2)
-            rows.append([-e2[0], -e2[1], -e2[2], 0.0, 0.0, 0.0, 0.0, 0.0])
-            rows.append([e1[0], e1[1], e1[2], 0.0, 0.0, 0.0, 0.0, 0.0])
-            var.extend([sig * sig] * 2)
-            stats.dof += 2
-            setattr(stats, "used_sun" if tag == "sun" else "used_mag", True)
-        if not rows:
-            return stats
-        dx, P = self._gain(np.array(rows), np.array(res), var, stats)
-        self.P = P
-        d = dx.tolist()
+    def _vector_rows(self, cols: tuple, meas: ArrayLike, ref: ArrayLike) -> tuple[list[list[float]], list[float]]:
+        """Two rows of H and the residual of one unit vector in the tangent plane of its prediction."""
+        pred = _rotate_BO(cols, ref)
+        e1, e2 = _tangent_basis(pred)
+        mx, my, mz = float(meas[0]), float(meas[1]), float(meas[2])  # type: ignore[index]
+        rows = [[-e2[0], -e2[1], -e2[2], 0.0, 0.0, 0.0, 0.0, 0.0], [e1[0], e1[1], e1[2], 0.0, 0.0, 0.0, 0.0, 0.0]]
+        return rows, [e1[0] * mx + e1[1] * my + e1[2] * mz, e2[0] * mx + e2[1] * my + e2[2] * mz]
+
+    def _correct(self, d: list[float]) -> None:
         hx, hy, hz = 0.5 * d[0], 0.5 * d[1], 0.5 * d[2]
         ang = math.sqrt(hx * hx + hy * hy + hz * hz)
         k = math.sin(ang) / ang if ang > 1e-12 else 1.0
@@ -487,7 +483,6 @@ class GyrolessMEKF(_FilterBase):
         self.q = (n0 / nn, n1 / nn, n2 / nn, n3 / nn)
         self.w = (self.w[0] + d[3], self.w[1] + d[4], self.w[2] + d[5])
         self.tau = (self.tau[0] + d[6], self.tau[1] + d[7])
-        return stats
 
     def attitude_cov(self) -> NDArray:
         return self.P[0:3, 0:3]
