@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import io
+from typing import Any
 
+import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 from fastapi.testclient import TestClient
@@ -47,3 +49,18 @@ def upload(client: TestClient, stream: str, body: bytes | str, headers: dict | N
 def stored_files(settings) -> list:
     root = settings.telemetry_dir
     return sorted(p for p in root.rglob("*.parquet")) if root.exists() else []
+
+
+def assert_json_plain(value: Any, path: str = "summary") -> None:
+    """Only dict/list/str/int/float/bool/None, finite floats (no numpy scalars)."""
+    if isinstance(value, dict):
+        for k, v in value.items():
+            assert isinstance(k, str), path
+            assert_json_plain(v, f"{path}.{k}")
+    elif isinstance(value, list):
+        for i, v in enumerate(value):
+            assert_json_plain(v, f"{path}[{i}]")
+    elif isinstance(value, float):
+        assert np.isfinite(value), path
+    else:
+        assert value is None or type(value) in (str, int, bool), f"{path}: {type(value)}"

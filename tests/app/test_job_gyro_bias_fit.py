@@ -15,6 +15,7 @@ from app.jobs.types.gyro_bias_fit import JOB
 from processing import rotations as rot
 from processing.simulate.seed003 import ARCSEC_RAD, Scenario003, simulate_seed003
 from processing.tasks import TaskError, TaskInputs, TaskResult, no_progress
+from tests.app.helpers import assert_json_plain
 
 T0_NS = 1_900_000_000 * 1_000_000_000
 
@@ -34,21 +35,6 @@ def inputs(sc: Scenario003, streams: dict[str, Any] | None = None, config: dict[
 
 def run(sc: Scenario003, **params: Any) -> TaskResult:
     return JOB.run(inputs(sc), JOB.params(**params), no_progress)
-
-
-def assert_json_plain(value: Any, path: str = "summary") -> None:
-    """Only dict/list/str/int/float/bool/None, finite floats (no numpy scalars)."""
-    if isinstance(value, dict):
-        for k, v in value.items():
-            assert isinstance(k, str), path
-            assert_json_plain(v, f"{path}.{k}")
-    elif isinstance(value, list):
-        for i, v in enumerate(value):
-            assert_json_plain(v, f"{path}[{i}]")
-    elif isinstance(value, float):
-        assert np.isfinite(value), path
-    else:
-        assert value is None or type(value) in (str, int, bool), f"{path}: {type(value)}"
 
 
 @pytest.fixture(scope="module")
