@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import io
+import time
+from collections.abc import Callable, Iterable
 from typing import Any
 
 import numpy as np
@@ -64,3 +66,32 @@ def assert_json_plain(value: Any, path: str = "summary") -> None:
         assert np.isfinite(value), path
     else:
         assert value is None or type(value) in (str, int, bool), f"{path}: {type(value)}"
+
+
+def run_coverage_jobs(client: TestClient, spacecraft: Iterable[str], timeout_s: float = 60.0) -> dict[str, str]:
+    """A telemetry_coverage job per spacecraft, waited for until it succeeded: {spacecraft: job id}."""
+    jobs = {sc: client.post("/api/v1/jobs", json={"type": "telemetry_coverage", "spacecraft": sc}).json()["id"]
+            for sc in spacecraft}
+    deadline = time.monotonic() + timeout_s
+    while any(client.get(f"/api/v1/jobs/{j}").json()["status"] != "succeeded" for j in jobs.values()):
+        assert time.monotonic() < deadline, "coverage jobs did not succeed in time"
+        time.sleep(0.05)
+    return jobs
+
+
+def issue_keys(client: TestClient, revoked_role: str = "admin") -> tuple[dict[str, str], Callable[..., dict]]:
+    """Secrets of keys of every role, of viewer/operator keys granted only spacecraft "A" (``viewer_A``,
+    ``operator_A``) and of a revoked ``revoked_role`` key (``revoked``); and the function that made them."""
+
+    def key(role: str, **extra: Any) -> dict:
+        r = client.post("/api/v1/keys", json={"name": f"{role}-{len(extra)}", "role": role, **extra})
+        assert r.status_code == 201, r.text
+        return r.json()
+
+    keys = {role: key(role)["secret"] for role in ("viewer", "operator", "admin")}
+    keys["viewer_A"] = key("viewer", spacecraft=["A"])["secret"]
+    keys["operator_A"] = key("operator", spacecraft=["A"])["secret"]
+    revoked = key(revoked_role)
+    client.delete(f"/api/v1/keys/{revoked['id']}")
+    keys["revoked"] = revoked["secret"]
+    return keys, key

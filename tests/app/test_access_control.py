@@ -6,12 +6,10 @@ a key granted only spacecraft A gets 404 for spacecraft B's objects (and never s
 
 from __future__ import annotations
 
-import time
-
 import pytest
 from fastapi.routing import APIRoute
 
-from tests.app.helpers import make_spacecraft, upload
+from tests.app.helpers import issue_keys, make_spacecraft, run_coverage_jobs, upload
 from tests.web.access_table import WEB_ACCESS
 
 PUBLIC = "public"
@@ -83,24 +81,8 @@ def world(client):
         upload(client, "gyro", "time,wx,wy,wz\n2023-06-01T00:00:00Z,1,2,3\n2023-06-01T00:00:01Z,1,2,3\n", sc=sc)
         upload(client, "gnss", "time,x,y,z,vx,vy,vz\n2023-06-01T00:00:00Z,7000000,0,0,0,7500,0\n"
                                "2023-06-01T00:00:01Z,6999996,7500,0,-8,7500,0\n", sc=sc)
-    jobs = {sc: client.post("/api/v1/jobs", json={"type": "telemetry_coverage", "spacecraft": sc}).json()["id"]
-            for sc in ("A", "B")}
-    deadline = time.monotonic() + 60
-    while any(client.get(f"/api/v1/jobs/{j}").json()["status"] != "succeeded" for j in jobs.values()):
-        assert time.monotonic() < deadline
-        time.sleep(0.05)
-
-    def key(role, **extra):
-        r = client.post("/api/v1/keys", json={"name": f"{role}-{len(extra)}", "role": role, **extra})
-        assert r.status_code == 201, r.text
-        return r.json()
-
-    keys = {role: key(role)["secret"] for role in ("viewer", "operator", "admin")}
-    keys["viewer_A"] = key("viewer", spacecraft=["A"])["secret"]
-    keys["operator_A"] = key("operator", spacecraft=["A"])["secret"]
-    revoked = key("admin")
-    client.delete(f"/api/v1/keys/{revoked['id']}")
-    keys["revoked"] = revoked["secret"]
+    jobs = run_coverage_jobs(client, ("A", "B"))
+    keys, key = issue_keys(client, revoked_role="admin")
     keys["expired"] = key("admin", expires_at="2001-01-01T00:00:00Z")["secret"]
     return {"jobs": jobs, "keys": keys}
 

@@ -8,12 +8,10 @@ refused cross-site. The session cookie is HttpOnly, SameSite=Lax, limited to /ui
 
 from __future__ import annotations
 
-import time
-
 import pytest
 
 from app.web.auth import COOKIE, csrf_token
-from tests.app.helpers import make_spacecraft, upload
+from tests.app.helpers import issue_keys, make_spacecraft, run_coverage_jobs, upload
 from tests.app.test_access_control import app_routes
 from tests.web.access_table import PUBLIC, WEB_ACCESS
 
@@ -31,24 +29,8 @@ def world(client, monkeypatch):
     for sc in ("A", "B"):
         make_spacecraft(client, sc, {"star_trackers": {"st1": {"q_BS": [1, 0, 0, 0]}}})
         assert upload(client, "gyro", GYRO_CSV, sc=sc).status_code == 201
-    jobs = {sc: client.post("/api/v1/jobs", json={"type": "telemetry_coverage", "spacecraft": sc}).json()["id"]
-            for sc in ("A", "B")}
-    deadline = time.monotonic() + 60
-    while any(client.get(f"/api/v1/jobs/{j}").json()["status"] != "succeeded" for j in jobs.values()):
-        assert time.monotonic() < deadline
-        time.sleep(0.05)
-
-    def key(role, **extra):
-        r = client.post("/api/v1/keys", json={"name": f"{role}-{len(extra)}", "role": role, **extra})
-        assert r.status_code == 201, r.text
-        return r.json()
-
-    keys = {role: key(role)["secret"] for role in ("viewer", "operator", "admin")}
-    keys["viewer_A"] = key("viewer", spacecraft=["A"])["secret"]
-    keys["operator_A"] = key("operator", spacecraft=["A"])["secret"]
-    revoked = key("operator")
-    client.delete(f"/api/v1/keys/{revoked['id']}")
-    keys["revoked"] = revoked["secret"]
+    jobs = run_coverage_jobs(client, ("A", "B"))
+    keys, _ = issue_keys(client, revoked_role="operator")
     return {"jobs": jobs, "keys": keys}
 
 
