@@ -2,7 +2,6 @@
 
 import numpy as np
 import pytest
-from scipy.stats import chi2
 
 from processing import rotations
 from processing.orbits import R_EARTH_M, sun_synchronous_inclination_rad
@@ -18,6 +17,7 @@ from processing.simulate.seed000 import (
 )
 from processing.streams import STREAMS
 from processing.timescales import iso_to_tai_ns
+from tests.processing.helpers import assert_same_streams, chi2_bounds
 
 START = int(iso_to_tai_ns("2016-06-01T00:00:00"))
 NS = 1_000_000_000
@@ -28,17 +28,11 @@ def scenario() -> Scenario000:
     return simulate_seed000(start_tai_ns=START, duration_s=600.0, seed=5)
 
 
-def _chi2_bounds(n: int, level: float = 0.999) -> tuple[float, float]:
-    return chi2.ppf((1 - level) / 2, n) / n, chi2.ppf(1 - (1 - level) / 2, n) / n
-
-
 def test_determinism_by_seed():
     a = simulate_seed000(start_tai_ns=START, duration_s=120.0, seed=3)
     b = simulate_seed000(start_tai_ns=START, duration_s=120.0, seed=3)
     c = simulate_seed000(start_tai_ns=START, duration_s=120.0, seed=4)
-    for stream, cols in a.streams.items():
-        for name, values in cols.items():
-            np.testing.assert_array_equal(values, b.streams[stream][name])
+    assert_same_streams(a.streams, b.streams)
     assert a.parameters["misalignment_rad"] == b.parameters["misalignment_rad"]
     assert not np.array_equal(a.streams["gyro_increments"]["dax"], c.streams["gyro_increments"]["dax"])
     assert a.parameters["scale_factor_error"] != c.parameters["scale_factor_error"]
@@ -138,7 +132,7 @@ def test_increments_follow_eq1(scenario):
     noise = incr - expected
     sigma = tr.gyro_noise_std_rad
     assert sigma == pytest.approx(0.001 * ARCSEC_RAD)
-    lo, hi = _chi2_bounds(noise.shape[0])
+    lo, hi = chi2_bounds(noise.shape[0])
     ratio = np.mean(noise**2, axis=0) / sigma**2
     assert np.all((ratio > lo) & (ratio < hi)), ratio
     assert np.all(np.abs(noise.mean(axis=0)) < 4 * sigma / np.sqrt(noise.shape[0]))
@@ -163,7 +157,7 @@ def test_star_tracker_noise(scenario):
     residual = rotations.quat_to_rotvec(rotations.quat_multiply(rotations.quat_conjugate(tr.q_IS_st), q))
     np.testing.assert_allclose(residual, tr.st_noise_rotvec_S, atol=1e-14)
     np.testing.assert_allclose(tr.st_noise_std_rad, 0.3 * ARCSEC_RAD)
-    lo, hi = _chi2_bounds(residual.shape[0])
+    lo, hi = chi2_bounds(residual.shape[0])
     ratio = np.mean(residual**2, axis=0) / tr.st_noise_std_rad**2
     assert np.all((ratio > lo) & (ratio < hi))
     np.testing.assert_allclose(tr.q_IS(tr.seconds(tr.st_time_tai_ns)), tr.q_IS_st, atol=1e-15)

@@ -4,7 +4,6 @@ import dataclasses
 
 import numpy as np
 import pytest
-from scipy.stats import chi2
 
 from processing import rotations
 from processing.frames import itrs_to_gcrs_state
@@ -23,6 +22,7 @@ from processing.simulate.seed003 import (
 )
 from processing.streams import STREAMS
 from processing.timescales import iso_to_tai_ns
+from tests.processing.helpers import assert_same_streams, chi2_bounds
 
 START = int(iso_to_tai_ns("2009-12-01T10:00:00"))
 ALPHA = 15.0 * DEG_RAD
@@ -34,18 +34,11 @@ def scenario() -> Scenario003:
     return simulate_seed003(start_tai_ns=START, seed=7)
 
 
-def _chi2_bounds(n: int, level: float = 0.999) -> tuple[float, float]:
-    """Two-sided bounds of s^2 / sigma^2 for s^2 = sum(x^2) / n of n zero-mean normal samples."""
-    return chi2.ppf((1 - level) / 2, n) / n, chi2.ppf(1 - (1 - level) / 2, n) / n
-
-
 def test_determinism_by_seed():
     a = simulate_seed003(start_tai_ns=START, seed=3, duration_s=300.0)
     b = simulate_seed003(start_tai_ns=START, seed=3, duration_s=300.0)
     c = simulate_seed003(start_tai_ns=START, seed=4, duration_s=300.0)
-    for stream, cols in a.streams.items():
-        for name, values in cols.items():
-            np.testing.assert_array_equal(values, b.streams[stream][name])
+    assert_same_streams(a.streams, b.streams)
     np.testing.assert_array_equal(a.truth.q_IB_gyro, b.truth.q_IB_gyro)
     np.testing.assert_array_equal(a.truth.st_removed_time_tai_ns, b.truth.st_removed_time_tai_ns)
     assert not np.array_equal(a.streams["gyro"]["wx"], c.streams["gyro"]["wx"])
@@ -120,7 +113,7 @@ def test_star_tracker_noise_statistics(scenario):
     residual = rotations.quat_to_rotvec(rotations.quat_multiply(rotations.quat_conjugate(q_ref), q_IS))
     np.testing.assert_allclose(residual, truth.st_noise_rotvec_S, atol=1e-13)
     n = residual.shape[0]
-    lo, hi = _chi2_bounds(n)
+    lo, hi = chi2_bounds(n)
     ratio = np.mean(residual**2, axis=0) / truth.st_noise_std_rad**2
     assert np.all((ratio > lo) & (ratio < hi)), (ratio, lo, hi)
     np.testing.assert_allclose(truth.st_noise_std_rad, np.array([2.5, 5.0, 15.0]) * ARCSEC_RAD)
@@ -138,7 +131,7 @@ def test_gyro_minus_truth_mean_is_the_bias(scenario):
     sigma = truth.gyro_noise_std_rad_s
     assert sigma == pytest.approx(1.5 * ARCSEC_RAD)
     assert np.all(np.abs(err.mean(axis=0) - truth.gyro_bias0_rad_s) < 4 * sigma / np.sqrt(n))
-    lo, hi = _chi2_bounds(n)
+    lo, hi = chi2_bounds(n)
     ratio = np.mean((err - truth.gyro_bias_rad_s) ** 2, axis=0) / sigma**2
     assert np.all((ratio > lo) & (ratio < hi))
 
@@ -261,7 +254,7 @@ def test_orbit_energy_constant_and_gnss_round_trip(scenario):
     g = scenario.streams["gnss"]
     dr = np.stack([g[c] for c in "xyz"], axis=-1) - truth.r_E
     dv = np.stack([g[c] for c in ("vx", "vy", "vz")], axis=-1) - truth.v_E
-    lo, hi = _chi2_bounds(dr.shape[0])
+    lo, hi = chi2_bounds(dr.shape[0])
     assert np.all((np.mean(dr**2, axis=0) > lo * 1.0) & (np.mean(dr**2, axis=0) < hi * 1.0))
     assert np.all((np.mean(dv**2, axis=0) > lo * 1e-6) & (np.mean(dv**2, axis=0) < hi * 1e-6))
     # the orbit is the 830 km sun-synchronous one
