@@ -52,12 +52,26 @@ __all__ = [
     "detect_lines",
     "find_lines",
     "fit_sinusoid",
+    "fit_sinusoids",
+    "grid_nodes",
+    "separable_frequencies",
 ]
 
 LOMB_SCARGLE_MAX_WORK = 20_000_000
-"""Above this many samples x frequencies, on-grid gapped data use the zero-filled FFT route."""
+"""Above this many samples x frequencies no spectrum is summed directly: on-grid gapped data use the
+zero-filled FFT, other samples on a uniform frequency grid the NUFFT (finufft)."""
+MAX_FREQUENCIES = 1 << 25
+"""Work guard of every route: a spectrum of more frequencies (33.5 M: over 38 days of 10 Hz samples)
+is refused with a SpectralError naming the sizes, rather than exhausting memory."""
 GRID_RTOL = 1e-6
 """Times are on a grid of step h when every (t_n - t_1)/h is within GRID_RTOL of an integer."""
+MAX_GRID_FILL = 64
+"""The zero-filled FFT is used only when the grid has at most this many nodes per present sample
+(otherwise a few samples spread over a long span would allocate a huge, mostly empty grid)."""
+NUFFT_MIN_FREQUENCIES = 256
+"""Fewer trial frequencies (e.g. the 9-point refinement grids) are always summed directly."""
+NUFFT_EPS = 1e-12
+"""Requested relative precision of the NUFFT sums (finufft's eps)."""
 
 
 class SpectralError(ValueError):
@@ -113,10 +127,40 @@ def amplitude_spectrum(x: ArrayLike, sample_period_s: float, *, oversample: int 
     return Spectrum(freq, 2.0 * np.abs(spec) / n, n, "fft", 1.0 / (n * sample_period_s))
 
 
+def grid_nodes(t_s: ArrayLike, step_s: float) -> tuple[NDArray, float] | None:
+    """Grid node of each sample and the grid step, when the times lie on a grid t_1 + k h.
+
+    t_s (N,) increasing [s]; step_s: an estimate of h (e.g. the median step). The step is refined as
+    span / (last node index), so that the float error of one difference (1.5e-12 s at t = 86,400 s)
+    does not accumulate over 10^6 nodes; then every (t_n - t_1)/h must be within GRID_RTOL of an
+    integer and the nodes must be distinct. Returns (k (N,) int64 from 0, h [s]) or None (off grid).
+    """
+    t = np.asarray(t_s, dtype=np.float64)
+    dt = t - t[0]
+    h = float(step_s)
+    if not h > 0 or t.size < 2:
+        return None
+    for _ in range(2):  # the refined step re-rounds nodes far from t_1 that a coarse step misplaced
+        k = np.round(dt / h)
+        if not k[-1] > 0:
+            return None
+        h = float(dt[-1] / k[-1])
+    if np.any(np.diff(k) <= 0) or np.any(np.abs(dt / h - k) > GRID_RTOL):
+        return None
+    return k.astype(np.int64), h
+
+
 def _grid_index(t: NDArray, h: float) -> NDArray | None:
-    k = (t - t[0]) / h
-    ki = np.round(k)
-    return ki.astype(np.int64) if np.all(np.abs(k - ki) <= GRID_RTOL) else None
+    nodes = grid_nodes(t, h)
+    return None if nodes is None else nodes[0]
+
+
+def _check_frequency_count(n_freq: float, n_samples: int) -> None:
+    if n_freq > MAX_FREQUENCIES:
+        raise SpectralError(
+            f"a spectrum of {n_samples} samples would need {n_freq:.3g} frequencies, more than the "
+            f"{MAX_FREQUENCIES} this module evaluates: analyse a shorter window or decimate the samples"
+        )
 
 
 def amplitude_spectrum_gapped(
@@ -130,10 +174,12 @@ def amplitude_spectrum_gapped(
     """
     t = np.asarray(t_s, dtype=np.float64)
     v = _values(x, t.size)
-    idx = _grid_index(t, sample_period_s)
-    if idx is None:
+    nodes = grid_nodes(t, sample_period_s)
+    if nodes is None:
         raise SpectralError(f"times are not on a grid of step {sample_period_s} s")
+    idx, sample_period_s = nodes
     n = t.size
+    _check_frequency_count(0.5 * (int(idx[-1]) + 1) * int(oversample), n)
     filled = np.zeros((int(idx[-1]) + 1,) + v.shape[1:])
     filled[idx] = v - v.mean(axis=0)
     n_fft = filled.shape[0] * int(oversample)
@@ -149,7 +195,9 @@ def amplitude_spectrum_uneven(
 
     t_s (N,) increasing [s]; x (N,) or (N, K); freq_hz (F,) >= 0 or None for the default grid (below),
     in steps of 1/(span oversample). At each f the value is the amplitude of the
-    least-squares c + a cos + b sin fit (see module docstring); f = 0 is reported as 0. Cost O(N F).
+    least-squares c + a cos + b sin fit (see module docstring); f = 0 is reported as 0. Cost O(N F)
+    summed directly up to LOMB_SCARGLE_MAX_WORK, beyond that O(N + F log F) by NUFFT when the
+    frequencies are uniformly spaced (the default grid is); SpectralError for larger non-uniform sets.
     The default grid runs from 1/span to Nyquist - 1/span: within one resolution cell of 0 a sinusoid
     is not separable from the floating mean, and within one of the Nyquist frequency of (nearly)
     uniform samples its sine term vanishes.
@@ -162,6 +210,7 @@ def amplitude_spectrum_uneven(
     if freq_hz is None:  # from one resolution cell (lower frequencies are degenerate with the mean)
         nyquist = 0.5 / float(np.median(np.diff(t)))
         df = 1.0 / (span * int(oversample))
+        _check_frequency_count((nyquist - 1.0 / span) / df, t.size)
         freq = np.arange(1.0 / span, nyquist - 1.0 / span + 0.5 * df, df)
     else:
         freq = np.asarray(freq_hz, dtype=np.float64)
@@ -186,13 +235,15 @@ def amplitude_spectrum_of_samples(
     steps = np.diff(t)
     if np.any(steps <= 0):
         raise SpectralError("t_s must be strictly increasing")
-    h = float(np.median(steps))
-    idx = _grid_index(t, h)
-    if idx is not None and idx[-1] == t.size - 1:
-        return amplitude_spectrum(v, h, oversample=oversample)
+    nodes = grid_nodes(t, float(np.median(steps)))
+    if nodes is not None and nodes[0][-1] == t.size - 1:
+        return amplitude_spectrum(v, nodes[1], oversample=oversample)
+    h = float(np.median(steps)) if nodes is None else nodes[1]
     n_freq = 0.5 * (t[-1] - t[0]) / h * oversample
-    if idx is not None and (prefer_fft or t.size * n_freq > LOMB_SCARGLE_MAX_WORK):
-        return amplitude_spectrum_gapped(t, v, h, oversample=oversample)
+    _check_frequency_count(n_freq, t.size)
+    if nodes is not None and nodes[0][-1] < MAX_GRID_FILL * t.size:
+        if prefer_fft or t.size * n_freq > LOMB_SCARGLE_MAX_WORK:
+            return amplitude_spectrum_gapped(t, v, h, oversample=oversample)
     return amplitude_spectrum_uneven(t, v, oversample=max(1, oversample))
 
 
@@ -300,8 +351,17 @@ def _ls_terms(t: NDArray, v: NDArray, freq: NDArray) -> tuple[NDArray, NDArray, 
     t (N,) [s], v (N, K), freq (F,) > 0 [Hz]. Returns (a, b, yc, ys), each (F, K): the fit
     c + a cos 2 pi f t + b sin 2 pi f t (the mean is absorbed by centring the columns) and the
     projections yc = C^T v, ys = S^T v of the centred data; a yc + b ys is the explained sum of
-    squares. Zechmeister & Kürster (2009) generalised Lomb-Scargle, computed directly.
+    squares. Zechmeister & Kürster (2009) generalised Lomb-Scargle, computed directly while
+    N x F <= LOMB_SCARGLE_MAX_WORK, else from NUFFT sums (:func:`_ls_terms_nufft`).
     """
+    if t.size * freq.size > LOMB_SCARGLE_MAX_WORK and freq.size > NUFFT_MIN_FREQUENCIES:
+        df = _uniform_step(freq)
+        if df is None:
+            raise SpectralError(
+                f"{freq.size} non-uniform trial frequencies x {t.size} samples exceed the direct-sum work "
+                f"limit {LOMB_SCARGLE_MAX_WORK:.0e}: give a uniform frequency grid (NUFFT route)"
+            )
+        return _ls_terms_nufft(t, v, float(freq[0]), df, freq.size)
     vc = v - v.mean(axis=0)
     out = [np.empty((freq.size, v.shape[1])) for _ in range(4)]
     step = max(1, _LS_CHUNK // max(t.size, 1))
@@ -319,6 +379,51 @@ def _ls_terms(t: NDArray, v: NDArray, freq: NDArray) -> tuple[NDArray, NDArray, 
         out[2][i:i + step] = yc
         out[3][i:i + step] = ys
     return out[0], out[1], out[2], out[3]
+
+
+def _uniform_step(freq: NDArray) -> float | None:
+    """The step df of freq when freq = freq[0] + i df to 1e-9 of df, else None."""
+    if freq.size < 2:
+        return None
+    df = float(freq[-1] - freq[0]) / (freq.size - 1)
+    ok = df > 0 and np.all(np.abs(freq - (freq[0] + df * np.arange(freq.size))) <= 1e-9 * df)
+    return df if ok else None
+
+
+def _uniform_sums(t: NDArray, c: NDArray, f0: float, df: float, n: int) -> NDArray:
+    """sum_j c[k, j] exp(i 2 pi (f0 + m df) t_j) for m = 0..n-1: (K, n) complex, by a type-1 NUFFT.
+
+    The strengths are turned by the phase at the middle frequency f0 + (n // 2) df, so that the
+    n modes requested, -n/2..(n-1)/2, are m - n // 2 (finufft's default increasing mode order).
+    """
+    import finufft  # imported on first use: only long off-grid spectra need it
+
+    mid = f0 + (n // 2) * df
+    strengths = np.ascontiguousarray(c * np.exp(2j * np.pi * mid * t)[None, :], dtype=np.complex128)
+    x = np.mod(2.0 * np.pi * df * t + np.pi, 2.0 * np.pi) - np.pi
+    return np.atleast_2d(finufft.nufft1d1(x, strengths, n, eps=NUFFT_EPS, isign=1))
+
+
+def _ls_terms_nufft(t: NDArray, v: NDArray, f0: float, df: float, n: int) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+    """:func:`_ls_terms` on the uniform grid f0 + m df (m < n), from type-1 NUFFT sums: O(N + n log n).
+
+    The centred sums follow from sum cos, sum sin (at f), sum cos 2wt, sum sin 2wt (at 2f) and the
+    data sums: C C = (N + sum cos 2wt)/2 - (sum cos)^2/N, S S = (N - sum cos 2wt)/2 - (sum sin)^2/N,
+    C S = sum sin 2wt / 2 - sum cos sum sin / N (the Press & Rybicki 1989 route of fast Lomb-Scargle).
+    """
+    n_s = t.size
+    vc = v - v.mean(axis=0)
+    at_f = _uniform_sums(t, np.vstack([np.ones(n_s), vc.T]), f0, df, n)  # (1 + K, n)
+    at_2f = _uniform_sums(t, np.ones((1, n_s)), 2.0 * f0, 2.0 * df, n)[0]
+    sc, ss = at_f[0].real, at_f[0].imag
+    cc = 0.5 * (n_s + at_2f.real) - sc * sc / n_s
+    sn = 0.5 * (n_s - at_2f.real) - ss * ss / n_s
+    cs = 0.5 * at_2f.imag - sc * ss / n_s
+    yc, ys = at_f[1:].real.T, at_f[1:].imag.T  # (n, K)
+    det = (cc * sn - cs * cs)[:, None]
+    a = (sn[:, None] * yc - cs[:, None] * ys) / det
+    b = (cc[:, None] * ys - cs[:, None] * yc) / det
+    return a, b, yc, ys
 
 
 def _ls_amplitudes(t: NDArray, v: NDArray, freq: NDArray) -> NDArray:
@@ -360,6 +465,40 @@ def fit_sinusoid(
     design = np.column_stack([np.ones_like(tc), np.cos(arg), np.sin(arg)])
     coef = np.linalg.lstsq(design, v, rcond=None)[0]
     return SinusoidFit(f0, float(t[0]), coef[1], coef[2], coef[0], np.hypot(coef[1], coef[2]))
+
+
+def fit_sinusoids(t_s: ArrayLike, x: ArrayLike, freqs_hz: ArrayLike) -> list[SinusoidFit]:
+    """Joint least-squares fit of sinusoids at fixed frequencies plus one mean, per component.
+
+    t_s (N,) [s], x (N,) or (N, K), freqs_hz (L,) > 0. Frequencies closer than one resolution cell of
+    the span are nearly collinear over it: merge them first (:func:`separable_frequencies`). Each
+    returned fit carries the common mean; phase origin t_s[0]. Returns L fits in the order given.
+    """
+    t = np.asarray(t_s, dtype=np.float64)
+    v = _values(x, t.size).reshape(t.size, -1)
+    f = np.asarray(freqs_hz, dtype=np.float64).reshape(-1)
+    tc = t - t[0]
+    arg = 2.0 * np.pi * tc[:, None] * f[None, :]
+    design = np.column_stack([np.ones_like(tc), np.cos(arg), np.sin(arg)])
+    coef = np.linalg.lstsq(design, v, rcond=None)[0]
+    n = f.size
+    return [
+        SinusoidFit(float(fi), float(t[0]), coef[1 + i], coef[1 + n + i], coef[0],
+                    np.hypot(coef[1 + i], coef[1 + n + i]))
+        for i, fi in enumerate(f)
+    ]
+
+
+def separable_frequencies(freqs_hz: ArrayLike, weights: ArrayLike, resolution_hz: float) -> NDArray:
+    """Frequencies that a record of resolution 1/span can tell apart: from the largest weight down,
+    each kept frequency absorbs those within one resolution cell of it. Returns the kept ones, sorted."""
+    f = np.asarray(freqs_hz, dtype=np.float64).reshape(-1)
+    order = np.argsort(-np.asarray(weights, dtype=np.float64).reshape(-1), kind="stable")
+    kept: list[float] = []
+    for i in order:  # lines (few)
+        if all(abs(f[i] - k) >= resolution_hz for k in kept):
+            kept.append(float(f[i]))
+    return np.sort(np.asarray(kept))
 
 
 @dataclass(frozen=True)
@@ -414,19 +553,7 @@ def find_lines(
         ratios.append(best.ratio)
     if not freqs:
         return [], v.copy()
-    # Final joint least-squares fit of all lines at their frequencies (plus the mean).
-    tc = t - t[0]
-    arg = 2.0 * np.pi * tc[:, None] * np.asarray(freqs)[None, :]
-    design = np.column_stack([np.ones_like(tc), np.cos(arg), np.sin(arg)])
-    coef = np.linalg.lstsq(design, cols, rcond=None)[0]
-    n = len(freqs)
-    found = [
-        FoundLine(
-            SinusoidFit(f, float(t[0]), coef[1 + i], coef[1 + n + i], coef[0], np.hypot(coef[1 + i], coef[1 + n + i])),
-            tuple(sorted(comps[i])),
-            ratios[i],
-        )
-        for i, f in enumerate(freqs)
-    ]
-    residual = cols - design[:, 1:] @ coef[1:]
+    fits = fit_sinusoids(t, cols, freqs)  # final joint least-squares fit of all lines (plus the mean)
+    found = [FoundLine(fit, tuple(sorted(comps[i])), ratios[i]) for i, fit in enumerate(fits)]
+    residual = cols - sum(fit.evaluate(t) for fit in fits)
     return sorted(found, key=lambda line: line.fit.freq_hz), residual.reshape(v.shape)

@@ -74,7 +74,8 @@ from processing.spectral import (
     alias_frequency,
     amplitude_spectrum_of_samples,
     find_lines,
-    fit_sinusoid,
+    fit_sinusoids,
+    separable_frequencies,
 )
 from processing.tasks import Progress
 
@@ -355,6 +356,14 @@ def _segment(
     return _Segment(sl, t_s, t0_ns, q, q_c, z, solver, harmonics is None, _smooth(solver, z, harmonics is None))
 
 
+def _segment_lines(line_fits: list[SinusoidFit], t_s: NDArray) -> NDArray:
+    """Frequencies of the lines that a stretch of times t_s (s) can separate (strongest first)."""
+    if not line_fits:
+        return np.zeros(0)
+    weights = [float(np.sum(lf.amplitude**2)) for lf in line_fits]
+    return separable_frequencies([lf.freq_hz for lf in line_fits], weights, 1.0 / float(t_s[-1] - t_s[0]))
+
+
 def _rate_noise_factor(seg: _Segment) -> float:
     """Time average of v(t) = d(t)^T (A^T A)^-1 d(t) over the segment, so that the fitted rates have
     mean variance sigma_i^2 v (A: the design at the samples, d: the time derivative of the basis).
@@ -486,17 +495,16 @@ def analyze_star_tracker_accuracy(
                     "gyro", f"y{k + 1}", lf.freq_hz, float(lf.amplitude[k]), float(lf.amplitude[k] / w),
                     float(lf.amplitude[k] / w / np.sqrt(2.0)), alias, True,
                 ))
-        # Per segment: amplitude and phase of each line (frequency fixed), oscillation removed.
+        # Per segment: amplitude and phase of the lines (frequencies fixed, fitted jointly), oscillation
+        # removed. Lines closer than the segment's resolution are one line there (e.g. the sidelobes a
+        # long record resolves beside a strong line): fitted apart, each would absorb the same motion.
         for seg in segments:
             seg.motion_S = np.zeros((seg.sl.stop - seg.sl.start, 3))
             if seg.gyro_idx is None or not line_fits:
                 continue
             mask = (g_res_ns >= g_ns[seg.gyro_idx[0]]) & (g_res_ns <= g_ns[seg.gyro_idx[-1]])
             tg = _seconds(g_res_ns[mask], seg.t0_ns)
-            theta_B = np.zeros_like(seg.motion_S)
-            for lf in line_fits:
-                fs = fit_sinusoid(tg, g_res[mask], lf.freq_hz, refine=False)
-                theta_B += fs.integral(seg.t_s)
+            theta_B = sum(fs.integral(seg.t_s) for fs in fit_sinusoids(tg, g_res[mask], _segment_lines(line_fits, tg)))
             seg.motion_S = theta_B @ dcm_BS  # rows: dcm_SB theta_B = dcm_BS^T theta_B
     report(0.5, "gyro lines")
 
@@ -642,10 +650,11 @@ def _gyro_comparison(
         resid = gfit.residuals(w_B_gyro[g_idx])
         rss_s += np.sum(resid**2, axis=0)
         dof_s += gfit.dof
-        for lf in line_fits:
-            resid = resid - fit_sinusoid(tg, resid, lf.freq_hz, refine=False).evaluate(tg)
+        seg_lines = _segment_lines(line_fits, tg)
+        if seg_lines.size:
+            resid = resid - sum(fs.evaluate(tg) for fs in fit_sinusoids(tg, resid, seg_lines))
         rss_n += np.sum(resid**2, axis=0)
-        dof_n += gfit.dof - 3 * len(line_fits)
+        dof_n += gfit.dof - 2 * seg_lines.size
         inside = (tg >= 0.0) & (tg <= fit.span_s)
         tg_in = tg[inside]
         g_sm = gfit.fitted[inside]

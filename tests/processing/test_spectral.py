@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 import scipy.signal
 
+from processing import spectral
 from processing.spectral import (
     SpectralError,
     alias_frequency,
@@ -160,3 +161,56 @@ def test_find_lines_prewhitens_sidelobes_of_a_strong_line():
 def test_bad_inputs(call, match):
     with pytest.raises(SpectralError, match=match):
         call()
+
+
+@pytest.mark.parametrize("hours", [24, 72])
+def test_long_10hz_records_take_the_fft_route(hours):
+    # Issue 24: at 24 h of 10 Hz the float median step is 0.09999999999854481 s; taking it as the grid
+    # step put far nodes 1.26e-5 steps off, and the spectrum fell back to an O(N x F) Lomb-Scargle that
+    # never finished. Times come as the jobs make them: int64 TAI ns -> seconds since the first sample.
+    n = hours * 36_000
+    t_ns = 1_259_661_600_000_000_000 + np.arange(n, dtype=np.int64) * 100_000_000
+    keep = np.ones(n, dtype=bool)
+    keep[5_000:5_100] = False  # one gap: the zero-filled grid route
+    t = (t_ns[keep] - t_ns[keep][0]).astype(np.float64) / 1e9
+    assert np.median(np.diff(t)) != 0.1  # the float step really is off
+    x = np.sin(2 * np.pi * 0.4 * t)
+    spec = amplitude_spectrum_of_samples(t, x)
+    assert spec.method == "fft_gapped"
+    assert spec.freq_hz[-1] == pytest.approx(5.0, rel=1e-12)
+    k = int(np.argmax(spec.amplitude))
+    assert spec.freq_hz[k] == pytest.approx(0.4, abs=spec.resolution_hz)
+    full = (t_ns - t_ns[0]).astype(np.float64) / 1e9
+    assert amplitude_spectrum_of_samples(full, np.sin(full)).method == "fft"
+
+
+def test_off_grid_samples_use_the_nufft_above_the_work_limit_and_agree_with_scipy(monkeypatch):
+    # Genuinely off-grid (jittered) times: above LOMB_SCARGLE_MAX_WORK the uniform frequency grid is
+    # summed by NUFFT; the estimator is unchanged (scipy's floating-mean Lomb-Scargle is the reference).
+    rng = np.random.default_rng(11)
+    t = np.arange(3000) * 0.5 + rng.uniform(-0.05, 0.05, 3000)
+    x = rng.standard_normal((3000, 2)) + np.column_stack([0.8 * np.sin(2 * np.pi * 0.31 * t), np.zeros(3000)])
+    direct = amplitude_spectrum_uneven(t, x)
+    monkeypatch.setattr(spectral, "LOMB_SCARGLE_MAX_WORK", 1000)
+    fast = amplitude_spectrum_uneven(t, x)
+    assert fast.freq_hz.size * t.size > 1000
+    np.testing.assert_allclose(fast.amplitude, direct.amplitude, rtol=1e-7, atol=1e-10)
+    ref = scipy.signal.lombscargle(t - t[0], x[:, 0] - x[:, 0].mean(), 2 * np.pi * fast.freq_hz,
+                                   normalize="amplitude", floating_mean=True)
+    np.testing.assert_allclose(fast.amplitude[:, 0], np.abs(ref), rtol=1e-7, atol=1e-10)
+    # non-uniform trial frequencies above the limit are refused, not summed for hours
+    with pytest.raises(SpectralError, match="non-uniform"):
+        amplitude_spectrum_uneven(t, x, np.sort(rng.uniform(0.01, 0.9, 500)))
+
+
+def test_every_route_has_a_work_guard(monkeypatch):
+    monkeypatch.setattr(spectral, "MAX_FREQUENCIES", 1000)
+    t = 0.1 * np.arange(5000.0)
+    with pytest.raises(SpectralError, match="frequencies"):
+        amplitude_spectrum_of_samples(np.delete(t, [7]), np.ones(4999))
+    with pytest.raises(SpectralError, match="frequencies"):
+        amplitude_spectrum_of_samples(t + np.r_[0.0, np.full(4999, 0.01)], np.ones(5000))
+    # a few samples over a long span do not allocate a mostly empty grid: the NUFFT route takes them
+    monkeypatch.setattr(spectral, "MAX_FREQUENCIES", 1 << 25)
+    sparse = np.r_[0.1 * np.arange(50), 1.0e5 + 0.1 * np.arange(50)]
+    assert amplitude_spectrum_of_samples(sparse, np.sin(sparse)).method == "lomb_scargle"
