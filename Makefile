@@ -1,20 +1,39 @@
-# The two commands: `make demo` and `make test`. Both create .venv and install the project first.
+# The two commands: `make demo` and `make test`. Both create .venv and install what they need first:
+# the demo only the runtime, the tests also the dev extras. uv (installed into the venv by pip) does the
+# installing; UV=0 falls back to plain pip.
 PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
-STAMP := $(VENV)/.installed
+UV ?= 1
+RUNTIME := $(VENV)/.installed-runtime
+DEV := $(VENV)/.installed-dev
 
-.PHONY: install test demo serve bench lint clean
+ifeq ($(UV),1)
+PIP_INSTALL = $(BIN)/uv pip install --quiet --python $(BIN)/python
+else
+PIP_INSTALL = $(BIN)/python -m pip install --quiet
+endif
 
-$(STAMP): pyproject.toml
+.PHONY: install install-dev test demo serve bench lint clean
+
+$(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[dev]'
-	touch $(STAMP)
+ifeq ($(UV),1)
+	$(BIN)/python -m pip install --quiet 'uv>=0.4'
+endif
 
-install: $(STAMP)
+$(RUNTIME): pyproject.toml | $(BIN)/python
+	$(PIP_INSTALL) -e .
+	touch $@
 
-lint: $(STAMP)
+$(DEV): pyproject.toml $(RUNTIME)
+	$(PIP_INSTALL) -e '.[dev]'
+	touch $@
+
+install: $(RUNTIME)
+install-dev: $(DEV)
+
+lint: $(DEV)
 	$(BIN)/ruff check .
 	$(BIN)/mypy app storage
 
@@ -24,13 +43,13 @@ TEST_WORKERS ?= 2
 test: lint
 	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 $(BIN)/python -m pytest -n $(TEST_WORKERS) --dist loadfile
 
-demo: $(STAMP)
+demo: $(RUNTIME)
 	$(BIN)/python -m app.demo
 
-serve: $(STAMP)
+serve: $(RUNTIME)
 	$(BIN)/attitude serve
 
-bench: $(STAMP)
+bench: $(DEV)
 	$(BIN)/python bench/ingest.py
 
 clean:

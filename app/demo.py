@@ -22,6 +22,7 @@ import numpy as np
 from app.client import ApiClient
 from app.devserver import running_server
 from processing import timescales
+from processing.formats.rinex_nav import parse_rinex_nav_reference
 from processing.simulate.seed000 import simulate_seed000
 from processing.simulate.seed002 import simulate_seed002
 from processing.simulate.seed003 import simulate_seed003
@@ -34,7 +35,10 @@ DEMO_SPECIFICATIONS = {"star_tracker_sigma_arcsec": [5.0, 10.0, 25.0], "gyro_bia
                        "orbital_attitude_deg": {"pitch": [-0.4, 0.4], "yaw": [0.6, 1.8], "roll": [-0.4, 0.4]}}
 
 
-NAV_FILE = Path(__file__).resolve().parents[2] / "shared" / "data" / "gnss-nav" / "brdc2800.15n"
+KEY_FILE = "api-key.txt"
+"""The demo's admin API key, beside its data (mode 600), so that ``--serve`` can serve them again."""
+NAV_FILE = Path(__file__).resolve().parents[1] / "data" / "gnss-nav" / "brdc2800.15n"
+"""The real RINEX 2 GPS navigation file of 2015-10-07 the paper-002 scenario uses (data/README.md)."""
 
 
 def _round(value: Any) -> Any:
@@ -84,43 +88,37 @@ def scenarios(start: int, seed: int, duration_s: float) -> list[dict[str, Any]]:
     out.append({"name": "agile-sim", "paper": "000", "scenario": s0, "config": s0.config,
                 "jobs": ["alignment_calibration"],
                 "truth": f"see processing/simulate/seed000.py truth (seed {seed}): drift (1, -0.8, 0.3) arcsec/s"})
-    if NAV_FILE.is_file():
-        from processing.formats.rinex_nav import parse_rinex_nav_reference
-
-        s2 = simulate_seed002(nav=parse_rinex_nav_reference(NAV_FILE.read_bytes()).columns, seed=seed,
-                              duration_s=duration_s)
-        out.append({"name": "smallsat-sim", "paper": "002", "scenario": s2, "config": s2.config,
-                    "reference": [("rinex_nav", NAV_FILE)], "jobs": ["data_screening", "vector_attitude"],
-                    "screened": {"vector_attitude"},
-                    "truth": f"{_count_faults(s2.truth)} injected gross faults (GNSS jumps, magnetometer "
-                             "spikes, bad panel currents)"})
-    else:
-        print(f"  (no GNSS navigation file at {NAV_FILE}: the paper-002 scenario is skipped)")
+    s2 = simulate_seed002(nav=parse_rinex_nav_reference(NAV_FILE.read_bytes()).columns, seed=seed,
+                          duration_s=duration_s)
+    out.append({"name": "smallsat-sim", "paper": "002", "scenario": s2, "config": s2.config,
+                "reference": [("rinex_nav", NAV_FILE)], "jobs": ["data_screening", "vector_attitude"],
+                "screened": {"vector_attitude"},
+                "truth": f"{_count_faults(s2.truth)} injected gross faults (GNSS jumps, magnetometer "
+                         "spikes, bad panel currents)"})
     s4 = simulate_seed004(start_tai_ns=start, duration_s=5863.0, seed=seed)
     out.append({"name": "microsat-sim", "paper": "004", "scenario": s4, "config": s4.config,
                 "jobs": ["gyroless_ekf"], "truth": "closed loop with the averaged LQR, one orbit at 1 Hz"})
     return out
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--out", type=Path, default=Path("var/demo"), help="demo data directory (wiped first)")
-    ap.add_argument("--seed", type=int, default=3)
-    ap.add_argument("--duration-s", type=float, default=1200.0)
-    ap.add_argument("--serve", action="store_true",
-                    help="afterwards keep the service running for the web UI (Ctrl-C stops it)")
-    args = ap.parse_args(argv)
+def _env(out: Path, token: str) -> dict[str, str]:
+    return {"ATTITUDE_DATA_DIR": str(out / "data"), "ATTITUDE_BOOTSTRAP_TOKEN": token, "ATTITUDE_DATABASE_URL": ""}
 
-    out = args.out.resolve()
+
+def run(out: Path, seed: int, duration_s: float) -> tuple[list[tuple[str, str, dict[str, Any], float, Path]], str]:
+    """Simulate, upload and run every paper's jobs into a wiped ``out``; returns (results, API key)."""
     shutil.rmtree(out, ignore_errors=True)
     reports = out / "reports"
     reports.mkdir(parents=True)
     token = "demo-" + secrets.token_urlsafe(16)
-    env = {"ATTITUDE_DATA_DIR": str(out / "data"), "ATTITUDE_BOOTSTRAP_TOKEN": token, "ATTITUDE_DATABASE_URL": ""}
+    key_file = out / KEY_FILE
+    key_file.write_text(token + "\n")
+    key_file.chmod(0o600)
+    env = _env(out, token)
 
     start = int(timescales.iso_to_tai_ns(["2023-06-01T00:00:00Z"])[0])
-    print(f"simulating the papers' scenarios ({args.duration_s:.0f} s, seed {args.seed}) ...")
-    worlds = scenarios(start, args.seed, args.duration_s)
+    print(f"simulating the papers' scenarios ({duration_s:.0f} s, seed {seed}) ...")
+    worlds = scenarios(start, seed, duration_s)
 
     results = []
     with running_server(env, log_path=out / "server.log") as base:
@@ -147,18 +145,7 @@ def main(argv: list[str] | None = None) -> int:
                 job = api.wait_for_job(api.post("/api/v1/jobs", body)["id"], timeout_s=1800)
                 elapsed = time.monotonic() - t0
                 target = reports / name / job_type
-                target.mkdir(parents=True)
-                _, html, _ = api.request("GET", f"/api/v1/jobs/{job['id']}/report")
-                (target / "report.html").write_bytes(html)
-                _, rep, _ = api.request("GET", f"/api/v1/jobs/{job['id']}/report", params={"format": "json"})
-                (target / "report.json").write_text(json.dumps(rep, indent=2))
-                _, pdf, _ = api.request("GET", f"/api/v1/jobs/{job['id']}/report", params={"format": "pdf"})
-                (target / "report.pdf").write_bytes(pdf)
-                (target / "artifacts").mkdir()
-                for a in api.get(f"/api/v1/jobs/{job['id']}/artifacts"):  # beside report.html, as its links expect
-                    _, data, _ = api.request("GET", a["url"])
-                    (target / "artifacts" / a["name"]).write_bytes(
-                        data if isinstance(data, bytes) else json.dumps(data).encode())
+                _save_reports(api, job, target)
                 results.append((name, job_type, job, elapsed, target / "report.html"))
                 print(f"  {job_type:<24} {job['status']:<9} {elapsed:6.1f} s")
 
@@ -174,17 +161,58 @@ def main(argv: list[str] | None = None) -> int:
     for sc_name, job_type, _, _, path in results:
         print(f"  {sc_name:<14} {job_type:<24} {path}")
     print(f"all files: {reports}")
+    return results, token
+
+
+def _save_reports(api: ApiClient, job: dict[str, Any], target: Path) -> None:
+    """report.html/.json/.pdf and every artifact of a job under ``target`` (artifacts/ beside the HTML)."""
+    (target / "artifacts").mkdir(parents=True)
+    _, html, _ = api.request("GET", f"/api/v1/jobs/{job['id']}/report")
+    (target / "report.html").write_bytes(html)
+    _, rep, _ = api.request("GET", f"/api/v1/jobs/{job['id']}/report", params={"format": "json"})
+    (target / "report.json").write_text(json.dumps(rep, indent=2))
+    _, pdf, _ = api.request("GET", f"/api/v1/jobs/{job['id']}/report", params={"format": "pdf"})
+    (target / "report.pdf").write_bytes(pdf)
+    for a in api.get(f"/api/v1/jobs/{job['id']}/artifacts"):  # beside report.html, as its links expect
+        _, data, _ = api.request("GET", a["url"])
+        (target / "artifacts" / a["name"]).write_bytes(data if isinstance(data, bytes) else json.dumps(data).encode())
+
+
+def serve(out: Path, token: str) -> None:
+    """Keep the service running on the demo data for the web UI until Ctrl-C."""
+    with running_server(_env(out, token), log_path=out / "server.log") as base:
+        print(f"\nweb UI: {base}/ui/  (sign in with the API key {token}); Ctrl-C stops the service")
+        try:
+            while True:
+                time.sleep(3600)
+        except KeyboardInterrupt:
+            pass
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--out", type=Path, default=Path("var/demo"), help="demo data directory")
+    ap.add_argument("--seed", type=int, default=3)
+    ap.add_argument("--duration-s", type=float, default=1200.0)
+    ap.add_argument("--serve", action="store_true",
+                    help="keep the service running for the web UI (Ctrl-C stops it); serves the demo data "
+                         "already in --out when there are some, else runs the demo first")
+    ap.add_argument("--fresh", action="store_true", help="with --serve: wipe --out and run the demo again first")
+    args = ap.parse_args(argv)
+
+    out = args.out.resolve()
+    key_file = out / KEY_FILE
+    if args.serve and not args.fresh and key_file.is_file() and (out / "data" / "catalog.db").is_file():
+        print(f"serving the demo data in {out} (--fresh to run the demo again)")
+        serve(out, key_file.read_text().strip())
+        return 0
+    results, token = run(out, args.seed, args.duration_s)
     if args.serve:
-        with running_server(env, log_path=out / "server.log") as base:
-            print(f"\nweb UI: {base}/ui/  (sign in with the API key {token}); Ctrl-C stops the service")
-            try:
-                while True:
-                    time.sleep(3600)
-            except KeyboardInterrupt:
-                pass
+        serve(out, token)
     else:
-        print(f"web UI: `.venv/bin/python -m app.demo --serve`, or `ATTITUDE_DATA_DIR={out / 'data'} "
-              f".venv/bin/attitude serve` and open http://127.0.0.1:8000/ui/ (API key {token})")
+        print(f"web UI: `.venv/bin/python -m app.demo --serve` (serves these data), or "
+              f"`ATTITUDE_DATA_DIR={out / 'data'} .venv/bin/attitude serve` and open http://127.0.0.1:8000/ui/ "
+              f"(API key in {key_file})")
     return 0 if all(job["status"] == "succeeded" for _, _, job, _, _ in results) else 1
 
 

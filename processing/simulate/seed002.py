@@ -58,7 +58,7 @@ NS_PER_S = 1_000_000_000
 GRAZING_ALTITUDE_M = 50e3
 FAULT_SPACING = 25
 DEFAULT_START_UTC = "2015-10-07T06:00:00"
-"""Inside the shared RINEX 2 GPS file brdc2800.15n (2015-10-07)."""
+"""Inside the RINEX 2 GPS file data/gnss-nav/brdc2800.15n (2015-10-07)."""
 PANEL_NORMALS_B = ((1.0, 0.0, 0.0), (-1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, -1.0, 0.0), (0.0, 0.0, 1.0),
                    (0.0, 0.0, -1.0))
 Q_BM_002 = (np.sqrt(0.5), 0.0, 0.0, np.sqrt(0.5))
@@ -194,7 +194,7 @@ def simulate_seed002(
     """Simulate a 002 segment: GNSS, magnetometer, panel currents and GNSS visibility with truth.
 
     nav: rinex_nav columns (processing.formats.rinex_nav) of GPS broadcast ephemerides covering the
-    segment (the shared brdc2800.15n covers 2015-10-07); start_tai_ns default 2015-10-07T06:00:00 UTC.
+    segment (data/gnss-nav/brdc2800.15n covers 2015-10-07); start_tai_ns default 2015-10-07T06:00:00 UTC.
     All other arguments keyword-only, SI units (angles rad); see the module docstring.
     Returns :class:`Scenario002`.
     """

@@ -8,10 +8,8 @@ are covered as soon as they are registered.
 
 from __future__ import annotations
 
-import fcntl
 import os
 import shutil
-import subprocess
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
@@ -59,18 +57,15 @@ def scenario() -> Any:
 
 def scenarios() -> dict[str, Any]:
     """Spacecraft name -> simulated scenario (``streams``, ``config``, ``truth``), the seed-003 one first."""
+    from processing.formats.rinex_nav import parse_rinex_nav_reference
+    from processing.simulate.seed002 import simulate_seed002
     from processing.simulate.seed004 import simulate_seed004
+    from tests.real_data import GNSS_NAV
 
     worlds = {SPACECRAFT: scenario(), GYROLESS: simulate_seed004(start_tai_ns=START, duration_s=DURATION_S, seed=4)}
-    from tests.shared_data import GNSS_NAV
-
-    nav = GNSS_NAV / "brdc2800.15n"
-    if nav.is_file():  # paper 002: magnetometer, panel currents, GNSS visibility from the real ephemerides
-        from processing.formats.rinex_nav import parse_rinex_nav_reference
-        from processing.simulate.seed002 import simulate_seed002
-
-        worlds[SMALLSAT] = simulate_seed002(nav=parse_rinex_nav_reference(nav.read_bytes()).columns, seed=2,
-                                            duration_s=DURATION_S)
+    # paper 002: magnetometer, panel currents, GNSS visibility from the real ephemerides
+    nav = (GNSS_NAV / "brdc2800.15n").read_bytes()
+    worlds[SMALLSAT] = simulate_seed002(nav=parse_rinex_nav_reference(nav).columns, seed=2, duration_s=DURATION_S)
     return worlds
 
 
@@ -105,7 +100,7 @@ def assign(job_types: Iterable[JobType], worlds: dict[str, Any]) -> tuple[dict[s
         if jt.name in where:
             continue
         if PREFERRED.get(jt.name) is not None:  # its paper's scenario could not be simulated here
-            skipped[jt.name] = f"its scenario ({PREFERRED[jt.name]}) is not simulated here (shared GNSS data missing?)"
+            skipped[jt.name] = f"its scenario ({PREFERRED[jt.name]}) is not simulated here"
         else:
             skipped[jt.name] = (f"needs {', '.join(jt.streams)}, which no simulated spacecraft "
                                 f"({', '.join(worlds)}) provides")
@@ -135,30 +130,12 @@ def png_ink_fraction(png_path: Path) -> float:
     return float(np.mean(rgb.min(axis=-1) < 0.9))
 
 
-def ensure_tools(tools: dict[str, str]) -> str | None:
-    """Install the Debian packages of missing binaries ({binary: package}); None when all are there,
-    else why they could not be had (the caller skips with that message)."""
+def missing_tools(tools: dict[str, str]) -> str | None:
+    """None when every binary is on PATH ({binary: Debian package}), else the reason to skip with the
+    command that installs them. Tests never install anything: `.ci/run` does, as root."""
     missing = {b: p for b, p in tools.items() if shutil.which(b) is None}
     if not missing:
         return None
-    packages = sorted(set(missing.values()))
-    if shutil.which("apt-get") is None or os.geteuid() != 0:
-        return (f"{', '.join(missing)} not installed and cannot be installed here (needs root and apt-get): "
-                f"apt-get install {' '.join(packages)}")
-    env = {**os.environ, "DEBIAN_FRONTEND": "noninteractive"}
-    install = ["apt-get", "install", "-y", "-qq", "--no-install-recommends", *packages]
-    # Parallel test workers may all get here: one installs while the others wait on the lock.
-    with open(output_dir() / "apt-get.log", "ab") as log:
-        fcntl.flock(log, fcntl.LOCK_EX)
-        try:
-            if any(shutil.which(b) is None for b in missing):
-                if subprocess.run(install, env=env, stdout=log, stderr=log, timeout=1200).returncode != 0:
-                    subprocess.run(["apt-get", "update", "-qq"], env=env, stdout=log, stderr=log, timeout=600)
-                    subprocess.run(install, env=env, stdout=log, stderr=log, timeout=1200)
-        finally:
-            fcntl.flock(log, fcntl.LOCK_UN)
-    still = [b for b in missing if shutil.which(b) is None]
-    if still:
-        return (f"installing {' '.join(packages)} failed ({', '.join(still)} still missing); "
-                f"see {output_dir()}/apt-get.log")
-    return None
+    packages = " ".join(sorted(set(missing.values())))
+    return (f"{', '.join(missing)} not installed: install the Debian packages {packages} "
+            "(as root; .ci/run does it for CI)")

@@ -13,7 +13,7 @@ from processing.formats.ccsds_odm import oem_segment, write_oem
 from processing.frames import gcrs_to_inertial_mat, gcrs_to_itrs_state
 from processing.orbits import R_EARTH_M, circular_orbit_state
 from tests.app.helpers import make_spacecraft, upload
-from tests.shared_data import GRACEFO
+from tests.real_data import GRACEFO
 
 TEXT = {"Content-Type": "text/plain"}
 CREATED = dt.datetime(2023, 6, 1, tzinfo=dt.UTC)
@@ -123,11 +123,9 @@ def test_bad_oem_uploads_are_422(client, change, message):
     assert message in r.json()["errors"][0]["message"]
 
 
-grace = pytest.mark.skipif(not GRACE.is_dir(), reason=f"shared GRACE-FO samples not found at {GRACE}")
 GRACE_CONFIG = {"star_trackers": {"sca": {"q_BS": [1, 0, 0, 0]}}, "gyro": {"q_BG": [1, 0, 0, 0]}}
 
 
-@grace
 @pytest.mark.parametrize("product, stream, rows", [
     # IMU1B: 34 gyro-1 epochs, 32 inside the spans of gyros 2 and 3 -> 30 central-difference rates, 31 increments
     ("SCA1B", "star_tracker", 100), ("GNV1B", "gnss", 100), ("IMU1B", "gyro", 30),
@@ -150,7 +148,6 @@ def test_gracefo_products_ingest(client, product, stream, rows):
         assert first["bx"] == pytest.approx(12328.33957672119) and first["time"] == "2023-05-31T23:59:42.083329Z"
 
 
-@grace
 def test_gracefo_product_to_the_wrong_stream_or_garbage_is_422(client):
     make_spacecraft(client, "gracefo-c", GRACE_CONFIG)
     body = (GRACE / "SCA1B_2023-06-01_C_04.txt").read_bytes()

@@ -16,7 +16,7 @@ from processing.formats.rinex_nav import parse_rinex_nav_reference
 from processing.screening_flags import filter_streams
 from processing.simulate.seed002 import simulate_seed002
 from processing.tasks import ReferenceData, TaskError, TaskInputs, no_progress
-from tests.shared_data import GNSS_NAV
+from tests.real_data import GNSS_NAV
 
 NAV = GNSS_NAV / "brdc2800.15n"
 

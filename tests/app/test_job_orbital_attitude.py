@@ -18,7 +18,7 @@ from processing.tasks import ReferenceData, TaskError, TaskInputs, no_progress
 from storage.models import Spacecraft
 from storage.telemetry import read_window
 from tests.app.helpers import make_spacecraft, upload
-from tests.shared_data import GRACEFO
+from tests.real_data import GRACEFO
 
 START = int(timescales.iso_to_tai_ns(["2023-06-01T00:00:00Z"])[0])
 NS = 1_000_000_000
@@ -164,7 +164,6 @@ def _stored_inputs(client, name: str) -> TaskInputs:
                       start_tai_ns=int(t[0]), end_tai_ns=int(t[-1]))
 
 
-@pytest.mark.skipif(not GRACE.is_dir(), reason=f"shared GRACE-FO samples not found at {GRACE}")
 def test_gracefo_c_ingests_and_flies_backwards_in_lvlh(client):
     """GRACE-FO C (leading) flies backwards: its SRF +X (K-band horn) points along -velocity at the
     trailing D, pitched ~0.7-0.8 deg below the local horizontal (half the 1.4 deg that the 171 km

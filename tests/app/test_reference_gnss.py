@@ -10,7 +10,7 @@ import pyarrow.parquet as pq
 from processing import timescales
 from processing.formats.ccsds_odm import oem_segment, write_oem
 from processing.gnss_ephemeris import satellite_positions_E
-from tests.shared_data import GNSS_NAV
+from tests.real_data import GNSS_NAV
 
 NAV_DIR = GNSS_NAV
 

@@ -34,7 +34,7 @@ from tests.app.report_world import (
     all_type_names,
     assign,
     config_with_specs,
-    ensure_tools,
+    missing_tools,
     output_dir,
     png_ink_fraction,
     scenarios,
@@ -76,7 +76,7 @@ def world(tmp_path_factory: pytest.TempPathFactory):
 
 @pytest.fixture(scope="module")
 def pdf_tools() -> None:
-    reason = ensure_tools({"chromium": "chromium", "pdftoppm": "poppler-utils"})
+    reason = missing_tools({"chromium": "chromium", "pdftoppm": "poppler-utils"})
     if reason:
         pytest.skip(reason)
 
@@ -164,7 +164,7 @@ def test_pdf_report_pages_are_not_blank(world, pdf_tools, job_type):
 
 
 def test_pdf_without_chromium_is_drawn_by_matplotlib(world, monkeypatch):
-    reason = ensure_tools({"pdftoppm": "poppler-utils"})
+    reason = missing_tools({"pdftoppm": "poppler-utils"})
     if reason:
         pytest.skip(reason)
     job = finished(world, "telemetry_coverage")

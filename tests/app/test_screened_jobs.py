@@ -7,7 +7,7 @@ import pytest
 from processing.formats.rinex_nav import parse_rinex_nav_reference
 from processing.simulate.seed002 import simulate_seed002
 from tests.app.test_jobs_api import upload_columns, wait
-from tests.shared_data import GNSS_NAV
+from tests.real_data import GNSS_NAV
 
 NAV = GNSS_NAV / "brdc2800.15n"
 

@@ -8,7 +8,7 @@ import pytest
 from processing import gnss_ephemeris as ge
 from processing.formats.rinex_nav import parse_rinex_nav
 from processing.frames import OMEGA_EARTH_RAD_S
-from tests.shared_data import GNSS_NAV
+from tests.real_data import GNSS_NAV
 
 NAV_DIR = GNSS_NAV
 

@@ -1,4 +1,4 @@
-"""GRACE-FO Level-1B readers on the shared 2023-06-01 samples; expected values are copied from the
+"""GRACE-FO Level-1B readers on the 2023-06-01 samples in data/; expected values are copied from the
 files' text (first/last data rows) and their YAML headers."""
 
 
@@ -7,10 +7,9 @@ import pytest
 
 from processing import rotations, timescales
 from processing.formats import gracefo_l1b as l1b
-from tests.shared_data import GRACEFO
+from tests.real_data import GRACEFO
 
 DATA = GRACEFO
-pytestmark = pytest.mark.skipif(not DATA.is_dir(), reason=f"shared GRACE-FO samples not found at {DATA}")
 
 
 def _read(product: str, sat: str = "C") -> l1b.L1bFile:

@@ -7,7 +7,7 @@ import pytest
 
 from processing import timescales
 from processing.formats.rinex_nav import RinexNavError, parse_rinex_nav, parse_rinex_nav_reference
-from tests.shared_data import GNSS_NAV
+from tests.real_data import GNSS_NAV
 
 NAV_DIR = GNSS_NAV
 RINEX2 = NAV_DIR / "brdc2800.15n"

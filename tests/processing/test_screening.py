@@ -13,7 +13,7 @@ from processing.formats.rinex_nav import parse_rinex_nav
 from processing.frames import gcrs_to_itrs_state
 from processing.screening_flags import accepted_mask, filter_streams, flags_table
 from processing.simulate.seed002 import simulate_seed002
-from tests.shared_data import GNSS_NAV
+from tests.real_data import GNSS_NAV
 
 NAV = GNSS_NAV / "brdc2800.15n"
 SEEDS = (0, 1, 2)

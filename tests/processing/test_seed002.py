@@ -15,7 +15,7 @@ from processing.gnss_ephemeris import satellite_positions_E
 from processing.screening import energy_h
 from processing.simulate.seed002 import Seed002ParameterError, simulate_seed002
 from processing.streams import STREAMS
-from tests.shared_data import GNSS_NAV
+from tests.real_data import GNSS_NAV
 
 NAV = GNSS_NAV / "brdc2800.15n"
 

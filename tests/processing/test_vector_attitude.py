@@ -12,7 +12,7 @@ from processing import rotations, screening
 from processing import vector_attitude as va
 from processing.formats.rinex_nav import parse_rinex_nav
 from processing.simulate.seed002 import simulate_seed002
-from tests.shared_data import GNSS_NAV
+from tests.real_data import GNSS_NAV
 
 NAV = GNSS_NAV / "brdc2800.15n"
 # The error model of the scenario: 100 nT magnetometer noise and the same IGRF in truth and model;

@@ -1,7 +1,7 @@
 """Browser tests: the real service in a child process, driven by Debian's headless Chromium via Selenium.
 
-The setup installs Debian's ``chromium`` and ``chromium-driver`` when they are missing (as root, with
-apt-get) and skips with the reason only when that is impossible. Nothing is downloaded by Selenium: it
+Debian's ``chromium`` and ``chromium-driver`` must be installed (`.ci/run` installs them); without them
+the tests skip with the install command. Nothing is downloaded by Selenium: it
 is pointed at /usr/bin/chromium and /usr/bin/chromedriver. Screenshots are kept under
 var/test-output/web/ (or $ATTITUDE_TEST_OUTPUT/web/).
 """
@@ -27,7 +27,7 @@ from tests.app.report_world import (
     START,
     assign,
     config_with_specs,
-    ensure_tools,
+    missing_tools,
     output_dir,
     scenarios,
 )
@@ -41,7 +41,7 @@ UPLOAD_TARGET = "other-sat"  # ... to a spacecraft of its own (the simulated one
 
 @pytest.fixture(scope="session")
 def browser_tools() -> None:
-    reason = ensure_tools({"chromium": "chromium", "chromedriver": "chromium-driver"})
+    reason = missing_tools({"chromium": "chromium", "chromedriver": "chromium-driver"})
     if reason:
         pytest.skip(reason)
     pytest.importorskip("selenium", reason="selenium is a dev dependency: pip install -e '.[dev]'")
