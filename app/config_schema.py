@@ -14,7 +14,7 @@ import numpy as np
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, field_validator
 
 from app.reports.specs import Specifications
-from processing.rotations import quat_canonical
+from processing.attitude.rotations import quat_canonical
 
 NAME = re.compile(r"^[A-Za-z0-9_.\-]{1,64}$")
 UNIT_TOLERANCE = 1e-6

@@ -21,12 +21,12 @@ import numpy as np
 
 from app.client import ApiClient
 from app.devserver import running_server
-from processing import timescales
 from processing.formats.rinex_nav import parse_rinex_nav_reference
 from processing.simulate.seed000 import simulate_seed000
 from processing.simulate.seed002 import simulate_seed002
 from processing.simulate.seed003 import simulate_seed003
 from processing.simulate.seed004 import simulate_seed004
+from processing.time import timescales
 
 ARCSEC_RAD = np.pi / 180 / 3600
 SKIP = {"executor_check"}

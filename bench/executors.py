@@ -26,8 +26,8 @@ from typing import Any
 
 from app.client import ApiClient
 from app.devserver import running_server
-from processing import timescales
 from processing.simulate.seed003 import simulate_seed003
+from processing.time import timescales
 
 TOKEN = "bench-executors-admin-token"
 SMALL_WINDOW_S = 600.0

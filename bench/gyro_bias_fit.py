@@ -26,9 +26,9 @@ import numpy as np
 from scipy.integrate import solve_ivp
 from scipy.optimize import least_squares
 
-from processing import rotations as rot
-from processing.gyro_bias_fit import ARCSEC_RAD, GyroBiasFit, fit_gyro_bias
-from processing.gyro_propagation import quat_cumprod, step_quaternions
+from processing.attitude import rotations as rot
+from processing.gyro_calibration.bias_fit import ARCSEC_RAD, GyroBiasFit, fit_gyro_bias
+from processing.gyro_calibration.propagation import quat_cumprod, step_quaternions
 from processing.simulate.seed003 import simulate_seed003
 
 T0_NS = 1_900_000_000 * 1_000_000_000

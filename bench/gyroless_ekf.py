@@ -16,11 +16,11 @@ import time
 
 import numpy as np
 
-from processing.gyroless_ekf import attitude_errors_rad, run_filter
-from processing.gyroless_estimation import GyrolessSettings, estimate_gyroless_attitude, prepare_gyroless_inputs
-from processing.rts_smoother import rts_smooth
+from processing.gyroless.ekf import attitude_errors_rad, run_filter
+from processing.gyroless.estimation import GyrolessSettings, estimate_gyroless_attitude, prepare_gyroless_inputs
+from processing.gyroless.rts_smoother import rts_smooth
 from processing.simulate.seed004 import orbit_period_s, simulate_seed004
-from processing.timescales import iso_to_tai_ns
+from processing.time.timescales import iso_to_tai_ns
 
 TARGET_S = 1.0
 

@@ -10,7 +10,7 @@ Data (generated here, not timed): the seed-003 attitude model (processing.simula
 sun-synchronous orbit, orbital orientation, pitch/yaw/roll as sums of slow sinusoids with periods of
 184..1080 s and +-0.3 deg, plus the 0.4 Hz, 3" mirror vibration) extended to 24 h, the 003 mounting,
 and white noise of 2.5/5/15 arcsec about the sensor axes, without gaps. The analysis splits the day
-into 72 segments of 20 min (003 §1.3), chooses M per segment (2 x GCV, processing.star_tracker_accuracy)
+into 72 segments of 20 min (003 §1.3), chooses M per segment (2 x GCV, processing.star_tracker.accuracy)
 and computes residuals, sigmas, rates, the residual spectrum and its lines.
 
 Baseline: the same call with ``method="lstsq"``, i.e. every harmonics path and fit by Householder QR
@@ -31,11 +31,11 @@ import time  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from processing import rotations  # noqa: E402
-from processing.orbits import R_EARTH_M, sun_synchronous_inclination_rad  # noqa: E402
+from processing.attitude import rotations  # noqa: E402
+from processing.orbits.two_body import R_EARTH_M, sun_synchronous_inclination_rad  # noqa: E402
 from processing.simulate.orbital_attitude_model import OrbitalAttitudeModel, SinusoidSeries  # noqa: E402
 from processing.simulate.seed003 import ARCSEC_RAD, DEG_RAD, ST_NOISE_STD_003_RAD, mounting_q_BS_003  # noqa: E402
-from processing.star_tracker_accuracy import analyze_star_tracker_accuracy  # noqa: E402
+from processing.star_tracker.accuracy import analyze_star_tracker_accuracy  # noqa: E402
 
 START_TAI_NS = 1_259_661_600 * 1_000_000_000  # 2009-12-01 (the 003 era); any epoch works
 

@@ -19,7 +19,7 @@ from collections.abc import Callable
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from processing import rotations, wahba
+from processing.attitude import rotations, wahba
 
 
 def make_case(n: int, n_vec: int, noise_rad: float, seed: int = 0) -> tuple[np.ndarray, ...]:
@@ -84,11 +84,11 @@ def main(argv: list[str] | None = None) -> int:
     for n_vec in (2, 3):
         q_true, b, r, w = make_case(args.epochs, n_vec, args.noise_rad, seed=n_vec)
         batch = {
-            "processing.wahba.q_method (batch, LAPACK)": lambda b=b, r=r, w=w: wahba.q_method(b, r, w,
+            "processing.attitude.wahba.q_method (batch, LAPACK)": lambda b=b, r=r, w=w: wahba.q_method(b, r, w,
                                                                                                covariance=False).q,
-            "processing.wahba.quest (batch)": lambda b=b, r=r, w=w: wahba.quest(b, r, w, covariance=False).q,
-            "processing.wahba.quest (batch, + covariance)": lambda b=b, r=r, w=w: wahba.quest(b, r, w).q,
-            "processing.wahba.esoq2 (batch)": lambda b=b, r=r, w=w: wahba.esoq2(b, r, w, covariance=False).q,
+            "processing.attitude.wahba.quest (batch)": lambda b=b, r=r, w=w: wahba.quest(b, r, w, covariance=False).q,
+            "processing.attitude.wahba.quest (batch, + covariance)": lambda b=b, r=r, w=w: wahba.quest(b, r, w).q,
+            "processing.attitude.wahba.esoq2 (batch)": lambda b=b, r=r, w=w: wahba.esoq2(b, r, w, covariance=False).q,
         }
         ours = None
         for name, fn in batch.items():
@@ -121,14 +121,14 @@ def main(argv: list[str] | None = None) -> int:
                 results[("ahrs", n_vec)] = m / wall
         else:
             print(f"{'ahrs QUEST (per epoch)':42s}   n/a: ahrs's QUEST takes exactly two vectors (gravity, field)")
-    quest3 = results[("processing.wahba.quest (batch)", 3)]
+    quest3 = results[("processing.attitude.wahba.quest (batch)", 3)]
     print(f"\nbatch QUEST, three vectors: {quest3:,.0f} solutions/s (target 1,000,000): "
           f"{'met' if quest3 >= 1e6 else 'NOT met (wall clock; see the CPU column)'}")
     for peer in ("scipy", "ahrs"):
         for n_vec in (2, 3):
             if (peer, n_vec) in results:
                 print(f"speed-up of batch QUEST over {peer} per epoch, {n_vec} vectors: "
-                      f"{results[('processing.wahba.quest (batch)', n_vec)] / results[(peer, n_vec)]:,.0f}x")
+                      f"{results[('processing.attitude.wahba.quest (batch)', n_vec)] / results[(peer, n_vec)]:,.0f}x")
     return 0
 
 

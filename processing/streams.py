@@ -3,7 +3,7 @@
 Pure data: column names, dtypes and units of every stream the service ingests. Storage, the API and
 the simulators all use these names, so they are public API. Inside the service every stream table
 carries ``time_tai_ns`` (int64 nanoseconds since 1970-01-01T00:00:00 TAI, see
-``processing.timescales``) and ``sensor`` besides the columns listed here; the HTTP edge calls the
+``processing.time.timescales``) and ``sensor`` besides the columns listed here; the HTTP edge calls the
 time column ``time``.
 """
 

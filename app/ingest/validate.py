@@ -19,9 +19,9 @@ import pyarrow as pa
 import pyarrow.compute as pc
 
 from app.ingest.errors import MAX_REPORTED, RowError, UploadError
-from processing import timescales
-from processing.rotations import quat_canonical, quat_conjugate
+from processing.attitude.rotations import quat_canonical, quat_conjugate
 from processing.streams import GNSS_SYSTEMS, QUATERNION_COLUMNS, SENSOR_COLUMN, TIME_COLUMN, StreamSpec
+from processing.time import timescales
 from storage.telemetry import arrow_schema
 
 SENSOR_NAME = re.compile(r"^[A-Za-z0-9_.\-]{1,64}$")

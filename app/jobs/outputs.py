@@ -12,8 +12,8 @@ import pyarrow as pa
 import pyarrow.csv as pacsv
 import pyarrow.parquet as pq
 
-from processing import timescales
 from processing.tasks import TaskResult
+from processing.time import timescales
 from storage.jobs import ArtifactStore, StoredArtifact
 
 if TYPE_CHECKING:  # matplotlib is imported by the job types, not at start-up

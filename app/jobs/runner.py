@@ -21,7 +21,7 @@ from app.jobs.outputs import jsonable, write_outputs
 from app.jobs.registry import JobType, registry
 from app.reports.inputs import describe_inputs
 from app.settings import Settings
-from processing.screening_flags import filter_streams
+from processing.screening.flags import filter_streams
 from processing.streams import STREAMS
 from processing.tasks import ReferenceData, TaskError, TaskInputs
 from storage import jobs as jobstore
@@ -135,7 +135,7 @@ def _apply_calibration(session: Session, job: Job, kind: str, streams: dict[str,
     cal = session.get(Calibration, cal_id)
     if cal is None:
         raise TaskError(f"the {kind} calibration {cal_id} chosen for this job no longer exists")
-    from processing.gyro_calibration import apply_gyro_calibration  # scipy-heavy: only jobs that need it
+    from processing.gyro_calibration.calibration import apply_gyro_calibration  # scipy-heavy: only jobs that need it
 
     v = cal.values
     for name, cols, interval in (("gyro", ("wx", "wy", "wz"), None),

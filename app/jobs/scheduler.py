@@ -36,7 +36,7 @@ from app.jobs.registry import registry
 from app.jobs.runner import stream_names
 from app.settings import Settings
 from app.version import __version__
-from processing import timescales
+from processing.time import timescales
 from storage import schedules as schedstore
 from storage.models import Job, Schedule, ScheduleRun, SpacecraftConfig, TelemetryFile, utcnow
 from storage.reference import latest_covering

@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 from sqlalchemy.orm import Session
 
-from processing.coverage import find_gaps
+from processing.screening.coverage import find_gaps
 from processing.streams import STREAMS
 from storage.parquet_store import ParquetStore
 from storage.telemetry import read_window
@@ -49,7 +49,7 @@ def describe_inputs(streams: Mapping[str, Mapping[str, Any]], start_tai_ns: int,
     largest_gaps (up to 20, by duration), leading_s/trailing_s (uncovered start/end of the window)}.
 
     ``streams`` as in ``TaskInputs.streams`` (columns ``time_tai_ns`` and ``sensor``). Gaps are intervals
-    longer than 1.5 nominal periods (processing.coverage).
+    longer than 1.5 nominal periods (processing.screening.coverage).
     """
     out: dict[str, dict[str, dict[str, Any]]] = {}
     for name in sorted(streams):

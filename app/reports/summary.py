@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from processing import timescales
+from processing.time import timescales
 
 RAD_ARCSEC = 180.0 / math.pi * 3600.0
 RAD_S_DEG_H = 180.0 / math.pi * 3600.0

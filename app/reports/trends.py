@@ -21,7 +21,7 @@ from sqlalchemy.orm import Session
 
 from app.reports.specs import PPM, RAD_ARCSEC, RAD_S_DEG_H, Specifications, lookup
 from app.reports.summary import flatten_numbers, iso
-from processing import timescales
+from processing.time import timescales
 from storage.models import Job
 
 if TYPE_CHECKING:  # matplotlib is imported when a trend is drawn, not at start-up

@@ -46,8 +46,8 @@ from app.web.auth import (
     principal_from_secret,
 )
 from app.web.render import STATIC, HtmlRoute, page
-from processing import timescales
 from processing.streams import STREAMS
+from processing.time import timescales
 from storage.models import Ingest, Job, Spacecraft, TelemetryFile
 from storage.telemetry import ConflictError, IngestMeta
 

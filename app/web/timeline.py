@@ -16,7 +16,7 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from app.reports.summary import iso
-from processing import timescales
+from processing.time import timescales
 from storage.models import Job, TelemetryFile
 
 NS = 1_000_000_000

@@ -35,7 +35,7 @@ import erfa
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from processing.timescales import tai_ns_to_jd
+from processing.time.timescales import tai_ns_to_jd
 
 __all__ = [
     "IGRF_REFERENCE_RADIUS_M",

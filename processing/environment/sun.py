@@ -29,7 +29,7 @@ import erfa
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from processing.timescales import NS_PER_DAY, TT_MINUS_TAI_NS, UNIX_EPOCH_JD
+from processing.time.timescales import NS_PER_DAY, TT_MINUS_TAI_NS, UNIX_EPOCH_JD
 
 __all__ = [
     "AU_M",

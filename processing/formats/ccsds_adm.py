@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from processing import rotations
+from processing.attitude import rotations
 from processing.formats.ccsds_kvn import (
     KvnError,
     Line,

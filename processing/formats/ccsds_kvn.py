@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from processing import timescales
+from processing.time import timescales
 
 TIME_SYSTEMS = {"UTC": "utc", "TAI": "tai", "TT": "tt", "GPS": "gps"}
 """CCSDS TIME_SYSTEM values this service converts (to our scales); TDB, TCB, UT1, MET, ... are not."""

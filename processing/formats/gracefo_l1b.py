@@ -35,7 +35,7 @@ import numpy as np
 import yaml
 from numpy.typing import NDArray
 
-from processing import timescales
+from processing.time import timescales
 
 NS_PER_S = 1_000_000_000
 END_OF_HEADER = "# End of YAML header"

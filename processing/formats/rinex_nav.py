@@ -31,14 +31,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from processing import timescales
+from processing.orbits.gnss_systems import DEFAULT_MAX_AGE_S, KEPLER_SYSTEMS
 from processing.tasks import ParsedReference
+from processing.time import timescales
 
 NS_PER_S = 1_000_000_000
 GPS_MINUS_TAI_NS = -19 * NS_PER_S
 BDT_MINUS_TAI_NS = -33 * NS_PER_S
-KEPLER_SYSTEMS = ("G", "E", "J", "C", "I")
-STATE_SYSTEMS = ("R", "S")
 _ORBIT_LINES = {"G": 7, "E": 7, "J": 7, "C": 7, "I": 7, "R": 3, "S": 3}
 # Field order of the 7 Keplerian "broadcast orbit" lines (4 fields each, 28 in all).
 _KEPLER_FIELDS = (
@@ -240,9 +239,7 @@ def parse_rinex_nav(raw: bytes | str) -> RinexNav:
 def parse_rinex_nav_reference(raw: bytes) -> ParsedReference:
     """Reference-data parser (kind "rinex_nav"): the columns of :func:`parse_rinex_nav` and the span
     they serve, from the first reference time minus to the last plus the validity of a record of the
-    file's systems (gnss_ephemeris.DEFAULT_MAX_AGE_S)."""
-    from processing.gnss_ephemeris import DEFAULT_MAX_AGE_S  # imports this module
-
+    file's systems (processing.orbits.gnss_systems.DEFAULT_MAX_AGE_S)."""
     nav = parse_rinex_nav(raw)
     cols = nav.columns
     systems = sorted(set(cols["system"].tolist()))

@@ -3,14 +3,14 @@
 Used by the scenario simulators (seed 003). Everything is analytic, so the attitude and its body
 rate are exactly consistent at any time (no numerical differentiation):
 
-- orbit: two-body circular orbit (processing.orbits.circular_orbit_state with zero node rate), in
+- orbit: two-body circular orbit (processing.orbits.two_body.circular_orbit_state with zero node rate), in
   the inertial frame I (GCRS for the simulators);
-- orbital frame O of 003 §1.6 (processing.orbital_frames.q_IO_003): axis 3 radial, axis 2 along
+- orbital frame O of 003 §1.6 (processing.frames.orbital.q_IO_003): axis 3 radial, axis 2 along
   r x v, axis 1 transversal. On a two-body orbit the plane is fixed and O turns about its axis 2 at
   |r x v| / |r|^2, so w_IO (rate of O relative to I, in O) = (0, |r x v| / |r|^2, 0);
 - attitude relative to O: pitch alpha, yaw beta, roll gamma (003 §1.6: alpha about axis 2, then beta
   about the new axis 3, then gamma about the resulting axis 1), q_OB = q_y(alpha) o q_z(beta) o
-  q_x(gamma) (processing.rotations.quat_from_pitch_yaw_roll); each angle is a sum of sinusoids
+  q_x(gamma) (processing.attitude.rotations.quat_from_pitch_yaw_roll); each angle is a sum of sinusoids
   (:class:`SinusoidSeries`), evaluated with its exact time derivative;
 - q_IB = q_IO o q_OB and w_B = dcm_BO w_IO + w_OB, where the rate of B relative to O, in B, of the
   2-3-1 sequence is (derivation: w_OB = gamma' e1 + beta' R1(gamma)^T e3 + alpha' R1(gamma)^T
@@ -30,9 +30,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from processing import rotations
-from processing.orbital_frames import q_IO_003
-from processing.orbits import circular_orbit_state
+from processing.attitude import rotations
+from processing.frames.orbital import q_IO_003
+from processing.orbits.two_body import circular_orbit_state
 
 
 @dataclass(frozen=True)
@@ -79,7 +79,7 @@ def body_rate_from_pitch_yaw_roll(
     """Angular velocity of B relative to O, in B coordinates (..., 3) [rad/s], of the 003 angles.
 
     Angles and their rates (...) broadcast; the sequence is that of
-    processing.rotations.quat_from_pitch_yaw_roll (003 §1.6): satisfies
+    processing.attitude.rotations.quat_from_pitch_yaw_roll (003 §1.6): satisfies
     q_OB' = 1/2 q_OB o w_OB for q_OB = quat_from_pitch_yaw_roll(pitch, yaw, roll).
     """
     a_dot = np.asarray(pitch_rate_rad_s, dtype=float)
@@ -119,7 +119,7 @@ class AttitudeState:
 class OrbitalAttitudeModel:
     """Circular two-body orbit plus pitch/yaw/roll series; evaluate at any time since the epoch.
 
-    a_m, inc_rad, raan_rad, u0_rad: orbit radius and elements at t = 0 (processing.orbits).
+    a_m, inc_rad, raan_rad, u0_rad: orbit radius and elements at t = 0 (processing.orbits.two_body).
     pitch, yaw, roll: angle series (003 §1.6 angles of B relative to the 003 orbital frame).
     """
 

@@ -9,8 +9,8 @@ changing the gyro noise leaves the manoeuvres unchanged.
 
 Model (defaults from 000, "Имитация работы СОУП"):
 
-- orbit: circular, 720 km, sun-synchronous inclination (processing.orbits), two-body, inertial frame
-  I = GCRS. Orbital frame O of 003 §1.6 (processing.orbital_frames.q_IO_003: axis 3 radial, axis 2
+- orbit: circular, 720 km, sun-synchronous inclination (processing.orbits.two_body), two-body, inertial frame
+  I = GCRS. Orbital frame O of 003 §1.6 (processing.frames.orbital.q_IO_003: axis 3 radial, axis 2
   along r x v); on a circular two-body orbit O turns about its axis 2 at the mean motion n, so the
   rate of O relative to I, in O, is exactly (0, n, 0).
 - attitude relative to O: q_OB(t) = q_OB(t_i) o (cos(phi/2), sin(phi/2) e_i) on manoeuvre segment i,
@@ -48,9 +48,14 @@ import numpy as np
 from numpy.random import PCG64, Generator, SeedSequence
 from numpy.typing import ArrayLike, NDArray
 
-from processing import rotations
-from processing.orbital_frames import q_IO_003
-from processing.orbits import R_EARTH_M, circular_orbit_state, mean_motion_rad_s, sun_synchronous_inclination_rad
+from processing.attitude import rotations
+from processing.frames.orbital import q_IO_003
+from processing.orbits.two_body import (
+    R_EARTH_M,
+    circular_orbit_state,
+    mean_motion_rad_s,
+    sun_synchronous_inclination_rad,
+)
 
 ARCSEC_RAD = np.pi / (180.0 * 3600.0)
 DEG_RAD = np.pi / 180.0

@@ -11,7 +11,7 @@ Model:
 - orbit: sun-synchronous, initially circular at ``altitude_m`` (550 km), node placed at local time
   ``ltan_h`` (10:30, so a third of the orbit is in the Earth's shadow), integrated in the GCRS with
   the central field and J2 about the true pole (DOP853, rtol 1e-11), so the two-body energy of the
-  truth oscillates as a real orbit's does; ITRS by processing.earth_rotation_interp (IAU 2006/2000A,
+  truth oscillates as a real orbit's does; ITRS by processing.frames.earth_rotation_interp (IAU 2006/2000A,
   zero EOP);
 - attitude relative to the orbital frame O of 002 (Z2 radial, Y2 orbital angular momentum, X2
   completes): pitch J = J0 + A_J sin(.), yaw psi = A_psi sin(.), roll phi = phi0 + rate * t (a slow spin
@@ -43,15 +43,15 @@ from numpy.random import PCG64, Generator, SeedSequence
 from numpy.typing import NDArray
 from scipy.integrate import solve_ivp
 
-from processing import rotations
-from processing.antenna_axis import dcm_EO_002, earth_occulted, line_of_sight_O
-from processing.earth_rotation_interp import gcrs_to_itrs_mat_interp
+from processing.attitude import rotations
 from processing.environment import igrf_field_E_nT, sun_position_I_m, sunlit_fraction
-from processing.frames import OMEGA_EARTH_RAD_S, gcrs_to_itrs_mat
-from processing.gnss_ephemeris import satellite_positions_E
-from processing.orbital_frames import dcm_IO_003
-from processing.orbits import J2, MU_EARTH_M3_S2, R_EARTH_M, sun_synchronous_inclination_rad
-from processing.timescales import iso_to_tai_ns
+from processing.frames.earth_orientation import OMEGA_EARTH_RAD_S, gcrs_to_itrs_mat
+from processing.frames.earth_rotation_interp import gcrs_to_itrs_mat_interp
+from processing.frames.orbital import dcm_IO_003
+from processing.orbits.gnss_ephemeris import satellite_positions_E
+from processing.orbits.two_body import J2, MU_EARTH_M3_S2, R_EARTH_M, sun_synchronous_inclination_rad
+from processing.time.timescales import iso_to_tai_ns
+from processing.vector_attitude.antenna_axis import dcm_EO_002, earth_occulted, line_of_sight_O
 
 DEG = np.pi / 180.0
 NS_PER_S = 1_000_000_000

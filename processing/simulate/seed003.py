@@ -7,7 +7,7 @@ GNSS noise), so that e.g. changing the gyro rate does not change the star-tracke
 
 Model (defaults from 003):
 
-- orbit: circular, 830 km, sun-synchronous inclination (processing.orbits), two-body (no J2 node
+- orbit: circular, 830 km, sun-synchronous inclination (processing.orbits.two_body), two-body (no J2 node
   drift: 0.014 deg over 20 min), inertial frame I = GCRS;
 - attitude: q_IB = q_IO_003 o q_OB(pitch, yaw, roll) (003 §1.6), pitch and roll slow oscillations
   within +-0.3 deg (003: |alpha|, |gamma| < 0.4 deg), yaw 1.2 deg +- 0.25 deg (003: oscillation of
@@ -26,7 +26,7 @@ Model (defaults from 003):
   Delta*, used as a realistic size only. (In 003, Delta is a correction added to the measured rate,
   w' = w_gyro + Delta, i.e. b = -Delta, and §2.4 expresses it in the star-tracker axes x1x2x3;
   here the same numbers are the bias b of w_meas = w_true + b in the gyro frame.)
-- GNSS: every 1 s, ITRS state from the inertial truth by processing.frames.gcrs_to_itrs_state
+- GNSS: every 1 s, ITRS state from the inertial truth by processing.frames.earth_orientation.gcrs_to_itrs_state
   with zero EOP, plus white noise 1 m and 1 mm/s per axis (003 §1.6 smoothing errors).
 """
 
@@ -39,9 +39,9 @@ import numpy as np
 from numpy.random import PCG64, Generator, SeedSequence
 from numpy.typing import NDArray
 
-from processing import rotations
-from processing.frames import EarthOrientation, gcrs_to_itrs_state
-from processing.orbits import R_EARTH_M, mean_motion_rad_s, sun_synchronous_inclination_rad
+from processing.attitude import rotations
+from processing.frames.earth_orientation import EarthOrientation, gcrs_to_itrs_state
+from processing.orbits.two_body import R_EARTH_M, mean_motion_rad_s, sun_synchronous_inclination_rad
 from processing.simulate.orbital_attitude_model import OrbitalAttitudeModel, SinusoidSeries
 
 ARCSEC_RAD = np.pi / (180.0 * 3600.0)

@@ -11,7 +11,7 @@ Model (defaults from 004):
   that the orbit is dawn-dusk at the start (orbit normal opposite to the Sun), which makes the Sun
   direction in the orbital frame close to 004's S_orb = (0, 1, 0) and the orbit eclipse-free near the
   equinoxes; ``sun_model="paper"`` uses exactly S_orb = (0, 1, 0) instead of the ephemeris;
-- attitude dynamics 004 eq. (1)-(3) (processing.rigid_body), J = diag(51.44, 51.48, 0.76) kg m^2,
+- attitude dynamics 004 eq. (1)-(3) (processing.attitude.rigid_body), J = diag(51.44, 51.48, 0.76) kg m^2,
   integrated by RK4 with ``substeps`` per control step T_s = 1 s; gravity gradient with n^2 = mu/r^3;
   the field in O follows the orbit (IGRF-14 at the true position; linear within a step);
 - disturbance tau_d = A sin(w0 t) in B, A = (3e-6, -5e-6, 9.8e-7) N m (004; zeros disable it);
@@ -20,14 +20,14 @@ Model (defaults from 004):
   sensor s_S = dcm_SB dcm_BO s_O turned by a random small rotation with sigma per tangent axis,
   absent in the Earth's shadow (conical model, any penumbra) and during periodic outages of
   ``sun_outage_s`` per orbit centred at argument of latitude ``sun_outage_center_u_deg`` (004: 2000 s
-  and 1000 s); GNSS ITRF position/velocity with white noise (zero EOP; processing.earth_rotation_interp);
+  and 1000 s); GNSS ITRF position/velocity with white noise (zero EOP; processing.frames.earth_rotation_interp);
 - on board: the EKF of 004 ("ekf"), the MEKF ("mekf") or the true state ("truth") feeds the energy law
   (004 eq. 6, beta = 1e8, alpha = 1e6) or the averaged LQR (004 eq. 7, R = diag(100, 100, 0.1),
   Q = (0.1 deg)^-2 I6, designed on the true field over the first orbit), or no controller ("none");
   the dipole is held over each step (zero-order hold), optionally saturated. The on-board filter is
   initialised by a two-vector (TRIAD) solution of the first measurements and w_BO = 0, and uses the
   IGRF field at the true position as its model (with the measurement noise it is told).
-Angles: roll, pitch, yaw of processing.rigid_body (3-2-1 from O to B); 004 starts its transients at
+Angles: roll, pitch, yaw of processing.attitude.rigid_body (3-2-1 from O to B); 004 starts its transients at
 (-30, 10, -20) deg with w_OB = 0.
 """
 
@@ -41,24 +41,8 @@ import numpy as np
 from numpy.random import PCG64, Generator, SeedSequence
 from numpy.typing import NDArray
 
-from processing import rotations
-from processing.earth_rotation_interp import gcrs_to_itrs_mat_interp
-from processing.environment.eclipse import sunlit_fraction
-from processing.environment.igrf import igrf_field_E_nT
-from processing.environment.sun import sun_direction_I, sun_position_I_m
-from processing.frames import OMEGA_EARTH_RAD_S, EarthOrientation
-from processing.gyroless_ekf import FILTERS, FilterTuning, initial_covariance, triad_q_OB
-from processing.magnetic_control import (
-    ENERGY_ALPHA_004,
-    ENERGY_BETA_004,
-    LQR_Q_004,
-    LQR_R_004,
-    AveragedLQR,
-    design_averaged_lqr,
-)
-from processing.orbital_frames import dcm_IO_lvlh_004
-from processing.orbits import R_EARTH_M, circular_orbit_state, mean_motion_rad_s
-from processing.rigid_body import (
+from processing.attitude import rotations
+from processing.attitude.rigid_body import (
     DISTURBANCE_004_N_M,
     INERTIA_004_KG_M2,
     RigidBody004,
@@ -66,6 +50,22 @@ from processing.rigid_body import (
     q_OB_from_roll_pitch_yaw_004,
     roll_pitch_yaw_004,
 )
+from processing.environment.eclipse import sunlit_fraction
+from processing.environment.igrf import igrf_field_E_nT
+from processing.environment.sun import sun_direction_I, sun_position_I_m
+from processing.frames.earth_orientation import OMEGA_EARTH_RAD_S, EarthOrientation
+from processing.frames.earth_rotation_interp import gcrs_to_itrs_mat_interp
+from processing.frames.orbital import dcm_IO_lvlh_004
+from processing.gyroless.ekf import FILTERS, FilterTuning, initial_covariance, triad_q_OB
+from processing.gyroless.magnetic_control import (
+    ENERGY_ALPHA_004,
+    ENERGY_BETA_004,
+    LQR_Q_004,
+    LQR_R_004,
+    AveragedLQR,
+    design_averaged_lqr,
+)
+from processing.orbits.two_body import R_EARTH_M, circular_orbit_state, mean_motion_rad_s
 
 __all__ = ["Scenario004", "Seed004ParameterError", "Truth004", "orbit_period_s", "simulate_seed004"]
 

@@ -17,8 +17,8 @@ from typing import Any
 import numpy as np
 
 from app.jobs.registry import JobType, registry
-from processing import timescales
 from processing.simulate.seed003 import simulate_seed003
+from processing.time import timescales
 
 START_ISO = "2023-06-01T00:00:00Z"
 START = int(timescales.iso_to_tai_ns([START_ISO])[0])

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from processing import timescales
 from processing.simulate.seed000 import simulate_seed000
+from processing.time import timescales
 from tests.app.test_jobs_api import upload_columns, wait
 
 START = int(timescales.iso_to_tai_ns(["2023-06-01T00:00:00Z"])[0])

@@ -16,8 +16,8 @@ from fastapi.testclient import TestClient
 from app.jobs.partitions import map_partitions, split_columns, time_partitions
 from app.jobs.registry import registry
 from app.main import create_app
-from processing import timescales
 from processing.simulate.seed003 import simulate_seed003
+from processing.time import timescales
 from tests.app.helpers import make_spacecraft
 from tests.app.test_jobs_api import upload_columns, wait
 

@@ -11,10 +11,10 @@ from fastapi.testclient import TestClient
 
 from app.api.routes import exports
 from app.main import create_app
-from processing import timescales
 from processing.formats.ccsds_odm import parse_oem
-from processing.frames import gcrs_to_itrs_state
-from processing.orbits import R_EARTH_M, circular_orbit_state
+from processing.frames.earth_orientation import gcrs_to_itrs_state
+from processing.orbits.two_body import R_EARTH_M, circular_orbit_state
+from processing.time import timescales
 from tests.app.helpers import make_spacecraft, upload
 from tests.conftest import ADMIN_TOKEN
 

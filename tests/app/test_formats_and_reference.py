@@ -8,8 +8,8 @@ import pytest
 
 from app.ingest.formats import Decoded, Decoder
 from app.reference.registry import ReferenceKind
-from processing import timescales
 from processing.tasks import ParsedReference
+from processing.time import timescales
 from tests.app.helpers import make_spacecraft, upload
 
 

@@ -2,23 +2,23 @@
 the API (app/ingest/decoders/ccsds.py, gracefo.py; app/reference/kinds/eop.py)."""
 
 import datetime as dt
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-from processing import rotations, timescales
+from processing.attitude import rotations
 from processing.formats.ccsds_adm import aem_segment, write_aem
 from processing.formats.ccsds_odm import oem_segment, write_oem
-from processing.frames import gcrs_to_inertial_mat, gcrs_to_itrs_state
-from processing.orbits import R_EARTH_M, circular_orbit_state
+from processing.frames.earth_orientation import gcrs_to_inertial_mat, gcrs_to_itrs_state
+from processing.orbits.two_body import R_EARTH_M, circular_orbit_state
+from processing.time import timescales
 from tests.app.helpers import make_spacecraft, upload
-from tests.real_data import GRACEFO
+from tests.real_data import GRACEFO, REFERENCE
 
 TEXT = {"Content-Type": "text/plain"}
 CREATED = dt.datetime(2023, 6, 1, tzinfo=dt.UTC)
 GRACE = GRACEFO
-EOP_FILE = Path(__file__).resolve().parents[1] / "data" / "finals2000A_2017-01-01_04.txt"
+EOP_FILE = REFERENCE / "finals2000A_2017-01-01_04.txt"
 T0 = int(timescales.iso_to_tai_ns(["2023-06-01T00:00:00Z"])[0])
 NS = 1_000_000_000
 

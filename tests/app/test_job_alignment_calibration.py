@@ -8,10 +8,10 @@ from matplotlib.figure import Figure
 from pydantic import ValidationError
 
 from app.jobs.types.alignment_calibration import JOB, Params
-from processing import rotations
+from processing.attitude import rotations
 from processing.simulate.seed000 import ARCSEC_RAD, simulate_seed000
 from processing.tasks import TaskError, TaskInputs, TaskResult, no_progress
-from processing.timescales import iso_to_tai_ns
+from processing.time.timescales import iso_to_tai_ns
 
 START = int(iso_to_tai_ns("2024-03-01T12:00:00"))
 DURATION_S = 900.0

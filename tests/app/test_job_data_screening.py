@@ -13,7 +13,7 @@ from pydantic import ValidationError
 from app.jobs.outputs import jsonable
 from app.jobs.types.data_screening import JOB, Params
 from processing.formats.rinex_nav import parse_rinex_nav_reference
-from processing.screening_flags import filter_streams
+from processing.screening.flags import filter_streams
 from processing.simulate.seed002 import simulate_seed002
 from processing.tasks import ReferenceData, TaskError, TaskInputs, no_progress
 from tests.real_data import GNSS_NAV

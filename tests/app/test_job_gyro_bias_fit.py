@@ -12,7 +12,7 @@ from matplotlib.figure import Figure
 from pydantic import ValidationError
 
 from app.jobs.types.gyro_bias_fit import JOB
-from processing import rotations as rot
+from processing.attitude import rotations as rot
 from processing.simulate.seed003 import ARCSEC_RAD, Scenario003, simulate_seed003
 from processing.tasks import TaskError, TaskInputs, TaskResult, no_progress
 from tests.app.helpers import assert_json_plain

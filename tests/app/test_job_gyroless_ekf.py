@@ -8,11 +8,11 @@ from matplotlib.figure import Figure
 from pydantic import ValidationError
 
 from app.jobs.types.gyroless_ekf import JOB, Params
-from processing.gyroless_ekf import attitude_errors_rad
-from processing.rotations import quat_to_dcm
+from processing.attitude.rotations import quat_to_dcm
+from processing.gyroless.ekf import attitude_errors_rad
 from processing.simulate.seed004 import simulate_seed004
 from processing.tasks import TaskError, TaskInputs, no_progress
-from processing.timescales import iso_to_tai_ns
+from processing.time.timescales import iso_to_tai_ns
 
 T0 = int(iso_to_tai_ns(["2025-03-20T12:00:00"])[0])
 DURATION_S = 1800.0

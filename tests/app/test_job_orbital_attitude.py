@@ -8,13 +8,14 @@ import pytest
 from sqlalchemy import select
 
 from app.jobs.types.orbital_attitude import AEM_FILE, JOB, Params
-from processing import rotations, timescales
-from processing.eop import parse_finals2000a
+from processing.attitude import rotations
 from processing.formats.ccsds_adm import parse_aem
-from processing.frames import gcrs_to_mod_mat
+from processing.frames.earth_orientation import gcrs_to_mod_mat
+from processing.frames.eop import parse_finals2000a
 from processing.simulate.seed003 import simulate_seed003
 from processing.streams import STREAMS
 from processing.tasks import ReferenceData, TaskError, TaskInputs, no_progress
+from processing.time import timescales
 from storage.models import Spacecraft
 from storage.telemetry import read_window
 from tests.app.helpers import make_spacecraft, upload

@@ -12,7 +12,7 @@ from pydantic import ValidationError
 from app.config_schema import SpacecraftConfig
 from app.jobs.outputs import jsonable
 from app.jobs.types.vector_attitude import JOB, Params
-from processing import rotations
+from processing.attitude import rotations
 from processing.formats.rinex_nav import parse_rinex_nav_reference
 from processing.simulate.seed002 import simulate_seed002
 from processing.tasks import ReferenceData, TaskError, TaskInputs, no_progress

@@ -14,8 +14,8 @@ import pytest
 from fastapi.testclient import TestClient
 
 from app.main import create_app
-from processing import timescales
 from processing.simulate.seed003 import simulate_seed003
+from processing.time import timescales
 from storage.db import make_engine, session_factory, upgrade
 from storage.models import Job, Spacecraft, utcnow
 from tests.app.helpers import PARQUET, make_spacecraft, upload

@@ -13,9 +13,10 @@ from pydantic import BaseModel, ConfigDict
 from app.jobs import registry as registry_module
 from app.jobs.registry import JobType
 from app.jobs.types import reconstruction
-from processing import rotations, timescales
+from processing.attitude import rotations
 from processing.simulate.seed003 import simulate_seed003
 from processing.tasks import TaskError, TaskInputs, TaskResult
+from processing.time import timescales
 
 START = int(timescales.iso_to_tai_ns(["2023-06-01T00:00:00Z"])[0])
 
@@ -190,7 +191,7 @@ def test_pipeline_job_end_to_end_with_one_combined_report(stages, settings, scen
 def test_real_screening_output_is_applied_with_its_own_filter(inputs):
     try:
         screening = importlib.import_module("app.jobs.types.data_screening").JOB
-        from processing.screening_flags import filter_streams
+        from processing.screening.flags import filter_streams
     except Exception:  # noqa: BLE001 - not written yet in this checkout
         pytest.skip("data_screening is not available")
     result = screening.run(inputs, screening.params(), lambda f, s: None)

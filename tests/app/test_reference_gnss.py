@@ -7,9 +7,9 @@ import io
 import numpy as np
 import pyarrow.parquet as pq
 
-from processing import timescales
 from processing.formats.ccsds_odm import oem_segment, write_oem
-from processing.gnss_ephemeris import satellite_positions_E
+from processing.orbits.gnss_ephemeris import satellite_positions_E
+from processing.time import timescales
 from tests.real_data import GNSS_NAV
 
 NAV_DIR = GNSS_NAV

@@ -112,7 +112,7 @@ def _gnss_csv(service: Any, path: Any) -> int:
 
 
 def iso_array(tai_ns: Any) -> list[str]:
-    from processing import timescales
+    from processing.time import timescales
 
     return [str(s) for s in timescales.tai_ns_to_iso(np.asarray(tai_ns, dtype=np.int64))]
 

@@ -16,11 +16,11 @@ from fastapi import APIRouter, HTTPException, Query, Request, Response
 
 from app.api.deps import SessionDep, StoreDep, Viewer
 from app.api.routes.spacecraft import get_spacecraft
-from processing import timescales
-from processing.eop import EopCoverageError, interpolate_eop
 from processing.formats.ccsds_odm import oem_segment, write_oem
-from processing.frames import EarthOrientation, itrs_to_inertial_state
+from processing.frames.earth_orientation import EarthOrientation, itrs_to_inertial_state
+from processing.frames.eop import EopCoverageError, interpolate_eop
 from processing.streams import STREAMS
+from processing.time import timescales
 from storage.reference import ReferenceStore, latest_covering
 from storage.telemetry import read_window
 

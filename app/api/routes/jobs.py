@@ -19,7 +19,7 @@ from app.jobs.registry import JobType, registry
 from app.jobs.runner import CALIBRATION_PREFIX, SCREENING_KEY, stream_names
 from app.reports.job_report import render_html, render_pdf, report_json
 from app.version import __version__
-from processing import timescales
+from processing.time import timescales
 from storage import calibrations
 from storage import jobs as jobstore
 from storage.jobs import ArtifactStore

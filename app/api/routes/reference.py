@@ -18,7 +18,7 @@ from app.api.pagination import MAX_LIMIT, announce_next, paginate
 from app.api.routes.telemetry import read_limited, table_response
 from app.jobs.outputs import jsonable
 from app.reference.registry import reference_kinds
-from processing import timescales
+from processing.time import timescales
 from storage.models import ReferenceDataset
 from storage.reference import ReferenceStore
 

@@ -29,8 +29,8 @@ from app.ingest.formats import decoders
 from app.ingest.parse import SUPPORTED_TYPES, UnsupportedMediaType, parse_body
 from app.ingest.validate import SensorPolicy, UploadOptions, validate
 from app.jobs.outputs import jsonable
-from processing import timescales
 from processing.streams import STREAMS, TIME_COLUMN, StreamSpec
+from processing.time import timescales
 from storage.models import Ingest, Spacecraft
 from storage.parquet_store import ParquetStore
 from storage.telemetry import ConflictError, IngestMeta, commit_ingest, read_window

@@ -20,15 +20,16 @@ import numpy as np
 import pyarrow as pa
 
 from app.ingest.formats import Decoded, Decoder
-from processing import rotations, timescales
+from processing.attitude import rotations
 from processing.formats.ccsds_adm import parse_aem
 from processing.formats.ccsds_odm import is_earth_fixed, parse_oem
-from processing.frames import (
+from processing.frames.earth_orientation import (
     UnknownFrameError,
     canonical_inertial_frame,
     inertial_to_gcrs_mat,
     inertial_to_itrs_state,
 )
+from processing.time import timescales
 
 
 def _inertial(name: str) -> str | None:

@@ -13,9 +13,9 @@ import numpy as np
 import pyarrow as pa
 
 from app.ingest.formats import Decoded, Decoder
-from processing import timescales
 from processing.formats import gracefo_l1b as l1b
-from processing.frames import inertial_to_itrs_state
+from processing.frames.earth_orientation import inertial_to_itrs_state
+from processing.time import timescales
 
 FEEDS = {"SCA1B": ("star_tracker",), "GNV1B": ("gnss",), "IMU1B": ("gyro", "gyro_increments"),
          "MAG1B": ("magnetometer",)}

@@ -1,6 +1,6 @@
 """Job ``alignment_calibration``: in-flight gyro drift, misalignment and scale factor against a star tracker (000).
 
-Wraps :func:`processing.gyro_calibration.calibrate_gyro` (Somov & Butyrin 2016): two-pass filtering of
+Wraps :func:`processing.gyro_calibration.calibration.calibrate_gyro` (Somov & Butyrin 2016): two-pass filtering of
 the gyro increments, the nonlinear Luenberger drift observer with motion classes and drift prediction
 through slews, QUEST alignment and scale factor from rate comparisons in 12..18 s windows, iterated to
 convergence. Gyro rates (stream ``gyro``) are integrated to increments when no ``gyro_increments`` are
@@ -25,11 +25,11 @@ from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field, PositiveFloat, model_validator
 
 from app.jobs.registry import JobType
-from processing import rotations
-from processing.drift_observer import MODE_NAMES, stationary_noise
-from processing.gyro_calibration import CalibrationSettings, GyroCalibration, calibrate_gyro
+from processing.attitude import rotations
+from processing.gyro_calibration.calibration import CalibrationSettings, GyroCalibration, calibrate_gyro
+from processing.gyro_calibration.drift_observer import MODE_NAMES, stationary_noise
+from processing.signal.two_pass_filter import increments_from_rates
 from processing.tasks import Progress, TaskError, TaskInputs, TaskResult
-from processing.two_pass_filter import increments_from_rates
 
 NS_PER_S = 1_000_000_000
 ARCSEC_RAD = np.pi / 648000.0

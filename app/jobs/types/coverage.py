@@ -9,7 +9,7 @@ from matplotlib.figure import Figure
 from pydantic import BaseModel, ConfigDict, Field
 
 from app.jobs.registry import JobType
-from processing.coverage import find_gaps
+from processing.screening.coverage import find_gaps
 from processing.tasks import Progress, TaskInputs, TaskResult
 
 NS = 1e9

@@ -1,9 +1,9 @@
 """Job ``data_screening`` (paper 002, eqs. 15-17): flag bad telemetry samples with the reasons.
 
-Thin layer over :func:`processing.screening.screen`. Every sample of the screened streams gets a row in
+Thin layer over :func:`processing.screening.criteria.screen`. Every sample of the screened streams gets a row in
 the ``flags`` table (accepted, and the ';'-joined names of the criteria that rejected it); nothing is
 deleted. Later jobs run with ``screened = true`` use only the accepted samples (the runner filters their
-inputs with :func:`processing.screening_flags.filter_streams` and the stored ``flags`` table).
+inputs with :func:`processing.screening.flags.filter_streams` and the stored ``flags`` table).
 """
 
 from __future__ import annotations
@@ -15,8 +15,8 @@ from matplotlib.figure import Figure
 from pydantic import BaseModel, ConfigDict, Field
 
 from app.jobs.registry import JobType
-from processing.screening import ScreeningParams, screen
-from processing.screening_flags import flags_table
+from processing.screening.criteria import ScreeningParams, screen
+from processing.screening.flags import flags_table
 from processing.tasks import Progress, TaskError, TaskInputs, TaskResult
 
 NS_PER_S = 1e9

@@ -1,6 +1,6 @@
 """Job ``gyro_bias_fit``: gyro offsets and attitude by Gauss-Newton with variational equations (003 §2).
 
-Wraps :func:`processing.gyro_bias_fit.fit_gyro_bias`: loads the star-tracker and gyro samples of the
+Wraps :func:`processing.gyro_calibration.bias_fit.fit_gyro_bias`: loads the star-tracker and gyro samples of the
 window, works in the reference star tracker's frame (003 §2.4), fits the whole segment and its
 sub-intervals, and reports the offsets in the sensor frame (the paper's Delta, arcsec/s) and in the body
 frame as a gyro bias (w_meas = w_true + b, rad/s), each with the honest sigma (gyro noise included) and
@@ -17,8 +17,8 @@ from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field, PositiveFloat
 
 from app.jobs.registry import JobType
-from processing import rotations
-from processing.gyro_bias_fit import (
+from processing.attitude import rotations
+from processing.gyro_calibration.bias_fit import (
     ARCSEC_RAD,
     GyroBiasFit,
     GyroBiasFitError,
@@ -27,9 +27,9 @@ from processing.gyro_bias_fit import (
     fit_subintervals,
     subinterval_edges,
 )
-from processing.sine_series import SineSeriesError, fit_sine_series, select_harmonics
+from processing.signal.sine_series import SineSeriesError, fit_sine_series, select_harmonics
 from processing.tasks import Progress, TaskError, TaskInputs, TaskResult
-from processing.timescales import tai_ns_to_iso
+from processing.time.timescales import tai_ns_to_iso
 
 NS_PER_S = 1_000_000_000
 DEG_RAD = np.pi / 180.0

@@ -1,7 +1,7 @@
 """Job ``gyroless_ekf`` (paper 004): attitude and rate of a gyroless spacecraft from magnetometer, sun
 sensor and GNSS, by the EKF of 004 or a multiplicative EKF, with an optional RTS smoother.
 
-Thin layer over :func:`processing.gyroless_estimation.estimate_gyroless_attitude`: picks the sensors and
+Thin layer over :func:`processing.gyroless.estimation.estimate_gyroless_attitude`: picks the sensors and
 their mountings and the inertia from the configuration, converts radians to degrees at the edge,
 builds the summary (consistency statistics instead of errors, since the truth is unknown), the
 attitude/rate and innovation tables, and figures in the spirit of 004 figs. 3-7.
@@ -16,8 +16,8 @@ from matplotlib.figure import Figure
 from pydantic import BaseModel, ConfigDict, Field
 
 from app.jobs.registry import JobType
-from processing.gyroless_ekf import FilterTuning
-from processing.gyroless_estimation import GyrolessError, GyrolessResult, GyrolessSettings, estimate_gyroless_attitude
+from processing.gyroless.ekf import FilterTuning
+from processing.gyroless.estimation import GyrolessError, GyrolessResult, GyrolessSettings, estimate_gyroless_attitude
 from processing.tasks import Progress, TaskError, TaskInputs, TaskResult
 
 DEG = 180.0 / np.pi
@@ -195,7 +195,7 @@ def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
         "sun_used": r.sun_used.astype(bool),
     }
     if r.smoothed is not None:
-        from processing.rigid_body import roll_pitch_yaw_004
+        from processing.attitude.rigid_body import roll_pitch_yaw_004
 
         fr, fp, fy = roll_pitch_yaw_004(f.q_OB)
         att.update({"roll_filtered_deg": fr * DEG, "pitch_filtered_deg": fp * DEG, "yaw_filtered_deg": fy * DEG,

@@ -4,7 +4,7 @@ Star-tracker quaternions (in the inertial frame the tracker reports) + mounting 
 (+ optional IERS EOP) -> attitude of the body relative to the orbital frame, its statistics, the
 time series, the "virtual orbit" (time since the preceding ascending node) and the reconstructed body
 attitude as a CCSDS AEM 2.0 (REF_FRAME_A = GCRF, REF_FRAME_B = SC_BODY_1, scalar last). The
-numerics are processing/orbital_attitude.py.
+numerics are processing/star_tracker/orbital_attitude.py.
 """
 
 from __future__ import annotations
@@ -17,11 +17,11 @@ from matplotlib.figure import Figure
 from pydantic import BaseModel, ConfigDict, Field
 
 from app.jobs.registry import JobType
-from processing.eop import EopCoverageError, interpolate_eop
 from processing.formats.ccsds_adm import aem_segment, write_aem
-from processing.frames import EarthOrientation, FrameInputError
-from processing.gnss_orbit import GnssFitError
-from processing.orbital_attitude import OrbitalAttitudeError, orbital_attitude, summary_of
+from processing.frames.earth_orientation import EarthOrientation, FrameInputError
+from processing.frames.eop import EopCoverageError, interpolate_eop
+from processing.orbits.gnss_orbit import GnssFitError
+from processing.star_tracker.orbital_attitude import OrbitalAttitudeError, orbital_attitude, summary_of
 from processing.tasks import Progress, TaskError, TaskInputs, TaskResult
 
 NS = 1e9

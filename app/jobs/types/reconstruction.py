@@ -32,7 +32,7 @@ from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from app.jobs.registry import JobType
-from processing import rotations
+from processing.attitude import rotations
 from processing.streams import STREAMS
 from processing.tasks import Progress, TaskError, TaskInputs, TaskResult
 
@@ -136,7 +136,7 @@ def apply_screening(streams: Mapping[str, Mapping[str, NDArray[Any]]],
     """Remove the samples a screening result rejects.
 
     data_screening's ``flags`` table (time_tai_ns, stream, sensor, key, accepted) goes through its own
-    :func:`processing.screening_flags.filter_streams`. Otherwise understood (per-sample, keyed by time and,
+    :func:`processing.screening.flags.filter_streams`. Otherwise understood (per-sample, keyed by time and,
     when present, sensor): one table ``flags`` with a ``stream`` column, or per-stream tables
     ``<stream>_flags`` / ``flags_<stream>`` / ``<stream>``; each with ``time_tai_ns`` and ``rejected`` (or
     ``ok``/``valid``/``accepted``). Returns the screened streams and the removed samples per stream.
@@ -144,7 +144,7 @@ def apply_screening(streams: Mapping[str, Mapping[str, NDArray[Any]]],
     combined = result.tables.get("flags")
     if combined is not None and {"stream", "key", "accepted"} <= set(combined):
         try:  # data_screening's own filter (matches panel/satellite keys too)
-            from processing.screening_flags import filter_streams
+            from processing.screening.flags import filter_streams
         except ImportError:
             pass
         else:

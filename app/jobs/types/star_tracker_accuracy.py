@@ -1,6 +1,6 @@
 """Job ``star_tracker_accuracy`` (paper 003 §1.3-1.5): accuracy of a star tracker from flight data.
 
-Thin layer over :func:`processing.star_tracker_accuracy.analyze_star_tracker_accuracy`: picks the
+Thin layer over :func:`processing.star_tracker.accuracy.analyze_star_tracker_accuracy`: picks the
 sensor and its mounting from the configuration, the gyro stream when present, converts radians to
 arcseconds at the edge and draws the report figures in the spirit of 003 figures 1-5.
 """
@@ -14,7 +14,7 @@ from matplotlib.figure import Figure
 from pydantic import BaseModel, ConfigDict, Field
 
 from app.jobs.registry import JobType
-from processing.star_tracker_accuracy import (
+from processing.star_tracker.accuracy import (
     StarTrackerAccuracy,
     StarTrackerAccuracyError,
     analyze_star_tracker_accuracy,

@@ -1,6 +1,6 @@
 """Job ``vector_attitude`` (paper 002): attitude from the antenna axis, magnetometer and panel currents.
 
-Thin layer over processing.vector_attitude: screens the inputs (processing.screening, default
+Thin layer over processing.vector_attitude.determination: screens the inputs (processing.screening.criteria, default
 thresholds) unless told not to, builds the vector pairs, picks the algorithm per epoch (002 figure 1)
 and reports q_OB with 002's pitch/yaw/roll, the method and loss per epoch and the residuals.
 """
@@ -14,9 +14,9 @@ from matplotlib.figure import Figure
 from pydantic import BaseModel, ConfigDict, Field
 
 from app.jobs.registry import JobType
-from processing.screening import ScreeningParams, screen
+from processing.screening.criteria import ScreeningParams, screen
 from processing.tasks import Progress, TaskError, TaskInputs, TaskResult
-from processing.vector_attitude import (
+from processing.vector_attitude.determination import (
     VECTORS,
     VectorAttitudeError,
     VectorAttitudeParams,

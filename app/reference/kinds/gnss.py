@@ -18,10 +18,10 @@ import numpy as np
 import pandas as pd
 
 from app.reference.registry import ReferenceKind
-from processing import timescales
 from processing.formats.ccsds_odm import is_earth_fixed, parse_oem
 from processing.formats.rinex_nav import parse_rinex_nav_reference
 from processing.tasks import ParsedReference
+from processing.time import timescales
 
 ORBIT_COLUMNS = ("x", "y", "z", "vx", "vy", "vz")
 

@@ -1,0 +1,3 @@
+"""Estimation tools shared by every filter: consistency measures (NIS, NEES, innovation whiteness) in
+``consistency``.
+"""

@@ -1,0 +1,401 @@
+"""In-flight gyro calibration and alignment against a star tracker, end to end (paper 000).
+
+Somov & Butyrin (2016), 000. Inputs: gyro angle increments (eq. 1) in the gyro frame G and
+star-tracker quaternions q_IS (frame A = S) every T_o. Steps:
+
+1. two-pass filter of the increments (figure 1) -> C2 quintic spline of the quasi-coordinates
+   (processing.signal.two_pass_filter);
+2. motion classes from the filtered rate: a star-tracker sample is in MT_alpha when |w| <= the rate
+   threshold (1 deg/s) over the intervals on both sides; alignment windows of 12..18 samples inside
+   MT_alpha and their star-tracker rates from 5th-order MRP polynomials (processing.gyro_calibration.alignment);
+   windows whose polynomial residual exceeds ``window_outlier_factor`` x the median (motion the
+   polynomial cannot follow, e.g. across the start of a slew) are left out;
+3. pass 0: QUEST alignment (eq. 9) and scale factor with a jointly estimated drift polynomial of the
+   trend degree (there is no drift model yet);
+4. pass i >= 1: the calibrated spline (eq. 2) is integrated over every star-tracker interval (eq. 7,
+   Dormand-Prince 5(4)); the nonlinear Luenberger observer (eqs. 4-8) estimates drift and attitude, with
+   the correction off and the drift predicted from its trend during slews (processing.gyro_calibration.drift_observer);
+   the drift model is the least-squares trend of its corrected estimates over the whole span; the
+   alignment and scale factor are re-estimated with that model subtracted and a constant residual drift
+   estimated jointly;
+5. stop when the change of every estimate is below ``change_tolerance`` times its standard deviation
+   (000 does one pass), at most max_iterations passes after pass 0.
+
+The last observer run (with the calibration of the last-but-one estimate, which differs from the final
+one by less than the tolerance) gives the drift history, the attitude residuals and the slews; the
+reported drift is the trend of the last window (``trend_window_s``) at the end of the data.
+
+Times are float64 seconds from any epoch (the job converts int64 TAI ns); quaternions scalar first.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from processing.attitude import rotations
+from processing.gyro_calibration.alignment import (
+    AlignmentError,
+    AlignmentEstimate,
+    WindowRates,
+    alignment_windows,
+    estimate_alignment,
+    star_tracker_window_rates,
+)
+from processing.gyro_calibration.drift_observer import (
+    MODE_CORRECTED,
+    MODE_PREDICTED,
+    DriftObserverResult,
+    DriftTrend,
+    fit_drift_trend,
+    ramp_lag_s,
+    run_drift_observer,
+    slew_error_bound,
+    stationary_noise,
+)
+from processing.signal.two_pass_filter import (
+    IntervalRotations,
+    QuasiCoordinateSpline,
+    interval_rate_maxima,
+    interval_rotations,
+    plan_substeps,
+    two_pass_filter,
+)
+
+__all__ = [
+    "CalibrationError",
+    "CalibrationSettings",
+    "GyroCalibration",
+    "SlewReport",
+    "apply_gyro_calibration",
+    "calibrate_gyro",
+    "correction_flags",
+    "drift_convergence_time",
+]
+
+FloatArray = NDArray[np.float64]
+ARCSEC_RAD = np.pi / 648000.0
+DEG_RAD = np.pi / 180.0
+
+
+class CalibrationError(ValueError):
+    """The data do not allow the calibration (too short, no calibration intervals, shapes)."""
+
+
+@dataclass(frozen=True)
+class CalibrationSettings:
+    """Parameters of :func:`calibrate_gyro` (defaults from 000 where it gives them).
+
+    t_r_s: observer settling time T_r [s] (nu = 3 / (xi T_r)); 200 s by default: with the growing-memory
+    start-up the drift converges to 0.01 "/s in ~30 s whatever T_r, while the stationary noise falls with
+    T_r (seed-000 hour: 0.0012 "/s rms at 200 s, 0.003 "/s at 60 s); the price is lag behind a changing
+    drift (the estimate is the drift ~120 s earlier at 200 s, ~36 s at 60 s; for drift changes of
+    0.2 "/s per hour T_r = 100 s halves the end-of-window error); xi: damping (0.95);
+    rate_threshold_rad_s: class MT_alpha bound (1 deg/s); window_min, window_max: alignment window
+    lengths in star-tracker samples (12..18); output_period_s: T_p of the rate comparison (0.125 s);
+    trend_window_s, trend_degree: drift trend for the prediction through slews and for the reported
+    drift (2nd order); max_iterations, change_tolerance: stop when every change < tolerance x sigma;
+    acquisition: growing-memory observer gains at start-up; estimate_drift_offset: joint constant
+    drift in the alignment; min_spread, max_misalignment_sigma_rad: observability thresholds;
+    convergence_tolerance_rad_s: tube for the drift convergence time; window_outlier_factor: windows
+    whose polynomial residual exceeds this factor x the median are not used; lag_compensation: advance
+    the drift trends by the observer's ramp lag (processing.gyro_calibration.drift_observer.ramp_lag_s).
+    """
+
+    t_r_s: float = 200.0
+    xi: float = 0.95
+    rate_threshold_rad_s: float = 1.0 * DEG_RAD
+    window_min: int = 12
+    window_max: int = 18
+    output_period_s: float = 0.125
+    trend_window_s: float = 600.0
+    trend_degree: int = 2
+    max_iterations: int = 6
+    change_tolerance: float = 0.2
+    acquisition: bool = True
+    estimate_drift_offset: bool = True
+    min_spread: float = 0.02
+    max_misalignment_sigma_rad: float = 10.0 * ARCSEC_RAD
+    convergence_tolerance_rad_s: float = 0.01 * ARCSEC_RAD
+    window_outlier_factor: float = 1.5
+    lag_compensation: bool = True
+
+
+@dataclass(frozen=True)
+class SlewReport:
+    """Slews (runs of samples with the correction off), each ended by a resumed correction.
+
+    start_s, end_s (P,): last corrected sample before and the resumed sample after [s]; rotation_angle_rad
+    (P,): integral of |w| over the slew; peak_rate_rad_s (P,); end_error_rad (P,): |innovation| at the
+    resumed sample (attitude error of the predicted estimate plus star-tracker noise);
+    bound_rad (P,): :func:`processing.gyro_calibration.drift_observer.slew_error_bound` with the 3-sigma
+    calibration errors.
+    """
+
+    start_s: FloatArray
+    end_s: FloatArray
+    rotation_angle_rad: FloatArray
+    peak_rate_rad_s: FloatArray
+    end_error_rad: FloatArray
+    bound_rad: FloatArray
+
+
+@dataclass(frozen=True)
+class GyroCalibration:
+    """Result of :func:`calibrate_gyro`.
+
+    alignment: the final :class:`AlignmentEstimate` (q_GS, misalignment, scale factor, sigmas).
+    drift_rad_s (3,): drift at the end of the data (trend of the last window), gyro frame;
+    drift_model: whole-span trend; drift_noise_rad_s (3,): std of the corrected observer estimates
+    about the model; drift_convergence_s: time from the first star-tracker sample after which every
+    corrected drift estimate stays within the tolerance of the model (NaN if never).
+    observer: the last observer run; windows: the star-tracker window rates; rotations: the interval
+    rotations of the last run; spline: the two-pass filtered raw gyro data (gyro frame);
+    iterations: list of dicts (misalignment_rad, scale_factor_error, change in sigmas) per pass;
+    converged: the change fell below the tolerance; slews: :class:`SlewReport`;
+    st_noise_rad (3,): star-tracker noise per axis from the window fits; integration_error_rad: the
+    largest Dormand-Prince error estimate over an interval; windows_used (W,): windows that passed the
+    fit-residual test; observer_rate_map, observer_drift_ref_rad_s: the rate_map and drift_ref_rad_s of
+    the last observer run (with ``rotations`` they reproduce it, e.g. with other motion classes).
+    """
+
+    alignment: AlignmentEstimate
+    drift_rad_s: FloatArray
+    drift_model: DriftTrend
+    drift_noise_rad_s: FloatArray
+    drift_convergence_s: float
+    observer: DriftObserverResult
+    windows: WindowRates
+    rotations: IntervalRotations
+    spline: QuasiCoordinateSpline
+    iterations: list[dict[str, object]] = field(default_factory=list)
+    converged: bool = False
+    slews: SlewReport | None = None
+    st_noise_rad: FloatArray = field(default_factory=lambda: np.full(3, np.nan))
+    integration_error_rad: float = float("nan")
+    windows_used: NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    observer_rate_map: FloatArray = field(default_factory=lambda: np.eye(3))
+    observer_drift_ref_rad_s: FloatArray = field(default_factory=lambda: np.zeros(3))
+
+
+def correction_flags(max_rate_rad_s: ArrayLike, valid: ArrayLike, threshold_rad_s: float) -> NDArray[np.bool_]:
+    """Class MT_alpha per star-tracker sample (K,) from the interval maxima (K - 1,): the intervals on
+    both sides of the sample are valid and have |w| <= threshold (the first/last sample: its one side)."""
+    slow = (np.asarray(max_rate_rad_s) <= threshold_rad_s) & np.asarray(valid, dtype=bool)
+    left = np.concatenate([slow[:1], slow])
+    right = np.concatenate([slow, slow[-1:]])
+    return left & right
+
+
+def drift_convergence_time(t_s: ArrayLike, drift: ArrayLike, usable: ArrayLike, reference: ArrayLike,
+                           tolerance: float) -> float:
+    """Seconds from t_s[0] to the first usable sample after which every usable |drift - reference| <= tol
+    on all axes (the usable samples before it included). NaN when the last usable sample is outside."""
+    t = np.asarray(t_s, dtype=np.float64)
+    ok = np.asarray(usable, dtype=bool)
+    bad = ok & np.any(np.abs(np.asarray(drift) - np.asarray(reference)) > tolerance, axis=-1)
+    idx_ok = np.flatnonzero(ok)
+    if idx_ok.size == 0:
+        return float("nan")
+    if not np.any(bad):
+        return float(t[idx_ok[0]] - t[0])
+    last_bad = int(np.flatnonzero(bad)[-1])
+    after = idx_ok[idx_ok > last_bad]
+    return float(t[after[0]] - t[0]) if after.size else float("nan")
+
+
+def _slews(obs: DriftObserverResult, rot: IntervalRotations, bound_terms: dict[str, float]) -> SlewReport:
+    mode = obs.mode
+    resumed = np.flatnonzero((mode[1:] != MODE_PREDICTED) & (mode[:-1] == MODE_PREDICTED)) + 1
+    starts, ends, angles, peaks, errors = [], [], [], [], []
+    for k in resumed.tolist():  # one iteration per slew
+        j = k - 1
+        while j > 0 and mode[j] == MODE_PREDICTED:
+            j -= 1
+        starts.append(obs.t_s[j])
+        ends.append(obs.t_s[k])
+        angles.append(float(np.sum(np.linalg.norm(rot.rotvec_rad[j:k], axis=-1))))
+        peaks.append(float(np.max(rot.max_rate_rad_s[j:k])))
+        errors.append(float(np.linalg.norm(obs.innovation_rad[k])))
+    s, e, th = np.asarray(starts), np.asarray(ends), np.asarray(angles)
+    bound = slew_error_bound(e - s, th, **bound_terms)
+    return SlewReport(start_s=s, end_s=e, rotation_angle_rad=th, peak_rate_rad_s=np.asarray(peaks),
+                      end_error_rad=np.asarray(errors), bound_rad=np.asarray(bound, dtype=float))
+
+
+def calibrate_gyro(
+    gyro_time_s: ArrayLike,
+    increments: ArrayLike,
+    interval_s: ArrayLike,
+    st_time_s: ArrayLike,
+    q_IS: ArrayLike,
+    *,
+    q_GS_nominal: ArrayLike = (1.0, 0.0, 0.0, 0.0),
+    settings: CalibrationSettings | None = None,
+    progress: Callable[[float, str], None] | None = None,
+) -> GyroCalibration:
+    """Calibrate drift, misalignment and scale factor of a gyro against a star tracker (000).
+
+    gyro_time_s (N,) [s] ends of the increments, increments (N, 3) [rad] in the gyro frame G,
+    interval_s (N,) [s]; st_time_s (K,) [s], q_IS (K, 4) star-tracker attitude (frame A = S);
+    q_GS_nominal: configured mounting of the gyro relative to the star tracker (q_BG^-1 o q_BS).
+    Star-tracker samples outside the gyro data are dropped. See the module docstring for the steps.
+    Returns :class:`GyroCalibration`.
+    """
+    cfg = settings or CalibrationSettings()
+    report = progress or (lambda fraction, stage: None)
+    t_st = np.asarray(st_time_s, dtype=np.float64)
+    q_st = rotations.quat_normalize(np.asarray(q_IS, dtype=np.float64))
+    if t_st.ndim != 1 or q_st.shape != (t_st.size, 4):
+        raise CalibrationError(f"expected st_time_s (K,) and q_IS (K, 4), got {t_st.shape} and {q_st.shape}")
+    if not np.all(np.diff(t_st) > 0):
+        raise CalibrationError("star-tracker times must be strictly increasing (one star tracker at a time)")
+    report(0.02, "two-pass filter of the gyro increments")
+    spline = two_pass_filter(gyro_time_s, increments, interval_s)
+    inside = (t_st >= spline.t_s[0]) & (t_st <= spline.t_s[-1])
+    t_st, q_st = t_st[inside], q_st[inside]
+    if t_st.size < 3 * cfg.window_max:
+        raise CalibrationError(
+            f"need at least {3 * cfg.window_max} star-tracker samples inside the gyro data, got {t_st.size}"
+        )
+    q_nom = rotations.quat_canonical(rotations.quat_normalize(np.asarray(q_GS_nominal, dtype=np.float64)))
+    t_o = float(np.median(np.diff(t_st)))
+    lag = ramp_lag_s(t_o, cfg.t_r_s, cfg.xi) if cfg.lag_compensation else 0.0
+
+    report(0.05, "motion classes and alignment windows")
+    plan = plan_substeps(spline, t_st)
+    on = correction_flags(*interval_rate_maxima(plan), cfg.rate_threshold_rad_s)
+    starts, stops = alignment_windows(t_st, on, n_min=cfg.window_min, n_max=cfg.window_max)
+    if starts.size < 3:
+        raise CalibrationError(
+            f"only {starts.size} alignment windows of {cfg.window_min}..{cfg.window_max} samples with "
+            f"|w| <= {cfg.rate_threshold_rad_s / DEG_RAD:g} deg/s; at least 3 are needed"
+        )
+    windows = star_tracker_window_rates(t_st, q_st, starts, stops, t_p_s=cfg.output_period_s)
+    rms = np.linalg.norm(windows.residual_rms_rad, axis=1)
+    used = rms <= cfg.window_outlier_factor * np.median(rms)
+    sel = used[windows.window]
+    t_win, w_A, win = windows.t_s[sel], windows.w_A_rad_s[sel], windows.window[sel]
+    inv_var = 1.0 / windows.rate_variance_s2[sel]
+    w_G_win = spline.rate(t_win)
+
+    def align(drift_model: DriftTrend | None, q_prior: FloatArray, m_prior: float, degree: int) -> AlignmentEstimate:
+        w_g = w_G_win if drift_model is None else w_G_win - drift_model(t_win)
+        try:
+            return estimate_alignment(
+                t_win, w_g, w_A, win, inv_var, q_GS_prior=q_prior, scale_factor_prior=m_prior, q_GS_nominal=q_nom,
+                drift_degree=degree, min_spread=cfg.min_spread, max_sigma_rad=cfg.max_misalignment_sigma_rad,
+            )
+        except AlignmentError as exc:
+            raise CalibrationError(str(exc)) from exc
+
+    # Pass 0: no drift model yet; the drift is a jointly estimated polynomial of the trend degree.
+    report(0.1, "pass 0: alignment and scale factor (QUEST) with a joint drift polynomial")
+    est = align(None, q_nom, 0.0, cfg.trend_degree)
+    history: list[dict[str, object]] = [{
+        "iteration": 0, "misalignment_rad": est.misalignment_rad.tolist(),
+        "scale_factor_error": est.scale_factor_error, "change_sigma": float("inf"),
+    }]
+    converged = False
+    obs: DriftObserverResult | None = None
+    model: DriftTrend | None = None
+    usable = np.zeros(t_st.size, dtype=bool)
+    for it in range(1, cfg.max_iterations + 1):
+        q_GS, m = est.q_GS, est.scale_factor_error
+        t_mid = 0.5 * (t_st[0] + t_st[-1])
+        b_ref = est.drift_offset(t_mid) + (model(t_mid) if model is not None else 0.0)
+        frac = 0.1 + 0.8 * it / (cfg.max_iterations + 1)
+        report(frac, f"pass {it}: integrating the calibrated gyro (eq. 7)")
+        dcm_SG = rotations.quat_to_dcm(rotations.quat_conjugate(q_GS))
+        rot = interval_rotations(plan, q_GX=q_GS, scale_factor_error=m, drift=b_ref)
+        on = correction_flags(rot.max_rate_rad_s, rot.valid, cfg.rate_threshold_rad_s)
+        report(frac + 0.3 / cfg.max_iterations, f"pass {it}: drift observer")
+        rate_map = dcm_SG / (1.0 + m)
+        obs = run_drift_observer(
+            t_st, q_st, rot.q, rot.rotvec_rad, rot.valid, on, rate_map=rate_map, drift_ref_rad_s=b_ref,
+            t_r_s=cfg.t_r_s, xi=cfg.xi, acquisition=cfg.acquisition, trend_window_s=cfg.trend_window_s,
+            trend_degree=cfg.trend_degree,
+        )
+        usable = (obs.mode == MODE_CORRECTED) & obs.stationary
+        if np.count_nonzero(usable) < 2:
+            raise CalibrationError("the drift observer never reached its stationary gains in a calibration interval")
+        model = fit_drift_trend(t_st[usable], obs.drift_rad_s[usable], cfg.trend_degree).shifted(lag)
+        report(frac + 0.6 / cfg.max_iterations, f"pass {it}: alignment and scale factor (QUEST)")
+        new = align(model, q_GS, m, 0)
+        d_theta = rotations.quat_to_rotvec(rotations.quat_multiply(rotations.quat_conjugate(q_GS), new.q_GS))
+        sig_th = np.sqrt(np.diag(new.misalignment_cov_rad2))
+        change = max(
+            float(np.max(np.abs(d_theta) / np.maximum(sig_th, 1e-300))),
+            abs(new.scale_factor_error - m) / max(new.scale_factor_sigma, 1e-300),
+        )
+        history.append({
+            "iteration": it, "misalignment_rad": new.misalignment_rad.tolist(),
+            "scale_factor_error": new.scale_factor_error,
+            "drift_offset_rad_s": new.drift_offset(t_st[-1]).tolist(), "change_sigma": change,
+        })
+        est = new
+        if change < cfg.change_tolerance:
+            converged = True
+            break
+    assert obs is not None and model is not None
+
+    report(0.92, "drift trend, convergence and slews")
+    corrected = obs.mode == MODE_CORRECTED
+    last = usable & (t_st >= t_st[-1] - cfg.trend_window_s)
+    end_trend = (fit_drift_trend(t_st[last], obs.drift_rad_s[last], cfg.trend_degree).shifted(lag) if np.any(last)
+                 else model)
+    drift_end = end_trend(t_st[-1])
+    dev = obs.drift_rad_s[usable] - model(t_st[usable])
+    noise = np.std(dev, axis=0) if dev.shape[0] > 1 else np.full(3, np.nan)
+    conv = drift_convergence_time(t_st, obs.drift_rad_s, corrected, model(t_st), cfg.convergence_tolerance_rad_s)
+    st_noise = np.sqrt(np.median(windows.residual_rms_rad[used] ** 2, axis=0))
+    att_sd, _ = stationary_noise(t_o, cfg.t_r_s, float(np.sqrt(np.mean(st_noise**2))), cfg.xi)
+    sig_th = np.nan_to_num(est.misalignment_sigma_rad, nan=cfg.max_misalignment_sigma_rad)
+    bound_terms = {
+        "initial_error_rad": 3.0 * float(np.sqrt(3.0)) * att_sd,
+        "drift_error_rad_s": 3.0 * float(np.linalg.norm(noise)),
+        "scale_factor_error": 3.0 * est.scale_factor_sigma,
+        "misalignment_error_rad": 3.0 * float(np.linalg.norm(sig_th)),
+    }
+    slews = _slews(obs, rot, bound_terms)
+    report(1.0, "done")
+    return GyroCalibration(
+        alignment=est, drift_rad_s=drift_end, drift_model=model, drift_noise_rad_s=noise,
+        drift_convergence_s=conv, observer=obs, windows=windows, rotations=rot, spline=spline,
+        iterations=history, converged=converged, slews=slews, st_noise_rad=st_noise,
+        integration_error_rad=float(np.max(rot.error_rad)), windows_used=used, observer_rate_map=rate_map,
+        observer_drift_ref_rad_s=b_ref,
+    )
+
+
+def apply_gyro_calibration(
+    values_G: ArrayLike,
+    *,
+    q_BG: ArrayLike,
+    scale_factor_error: float,
+    drift_rad_s: ArrayLike,
+    interval_s: ArrayLike | None = None,
+) -> FloatArray:
+    """Calibrated gyro data in the body frame (000, eq. 2): R(q_BG) (x - b tau) / (1 + m).
+
+    values_G (N, 3): rates [rad/s] (interval_s None) or increments [rad] over interval_s (N,) [s], in the
+    gyro frame; q_BG: calibrated mounting (summary ``calibration.q_BG`` = q_BS o q_GS^-1);
+    scale_factor_error m and drift_rad_s b (3,) or (N, 3) in the gyro frame, in the sense
+    w_meas = (1 + m) S^Delta w + b. Returns (N, 3) body-frame rates or increments. This is what later
+    jobs apply when they use a stored calibration version.
+    """
+    x = np.asarray(values_G, dtype=np.float64)
+    b = np.asarray(drift_rad_s, dtype=np.float64)
+    if x.ndim != 2 or x.shape[1] != 3 or b.shape not in {(3,), x.shape}:
+        raise CalibrationError(f"expected values (N, 3) and drift (3,) or (N, 3), got {x.shape} and {b.shape}")
+    if interval_s is not None:
+        tau = np.asarray(interval_s, dtype=np.float64)
+        if tau.shape != x.shape[:1]:
+            raise CalibrationError(f"interval_s must be (N,) = {x.shape[:1]}, got {tau.shape}")
+        b = b * tau[:, None]
+    return rotations.quat_rotate(rotations.quat_normalize(np.asarray(q_BG, dtype=np.float64)), x - b) / (
+        1.0 + float(scale_factor_error)
+    )

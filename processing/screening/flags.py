@@ -1,0 +1,79 @@
+"""Per-sample screening flags as a table, and the inputs of later jobs filtered by it (002)."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from numpy.typing import ArrayLike, NDArray
+
+from processing.screening.criteria import ScreeningResult
+
+Columns = Mapping[str, Any]
+
+# ------------------------------------------------------------------------------------------------
+# Flags table and filtering of later jobs' inputs.
+
+
+def sample_keys(stream: str, cols: Columns) -> NDArray[np.object_]:
+    """The key of each row besides (sensor, time): the panel number, the satellite ("G05"), or ""."""
+    n = len(cols["time_tai_ns"])
+    if stream == "panel_currents":
+        return np.array([str(int(x)) for x in np.asarray(cols["panel"])], dtype=object)
+    if stream == "gnss_visibility":
+        return np.array([f"{s}{int(k):02d}" for s, k in zip(np.asarray(cols["system"]), np.asarray(cols["prn"]),
+                                                             strict=True)], dtype=object)
+    return np.full(n, "", dtype=object)
+
+
+def flags_table(result: ScreeningResult, streams: Mapping[str, Columns]) -> dict[str, NDArray[Any]]:
+    """One row per screened sample: time_tai_ns, stream, sensor, key, accepted, reasons (';'-joined
+    criterion names, "" when accepted). Rows in stream order, then the stream's own row order."""
+    parts: dict[str, list[NDArray[Any]]] = {k: [] for k in ("time_tai_ns", "stream", "sensor", "key", "accepted",
+                                                             "reasons")}
+    for name in result.n_rows:
+        cols = streams[name]
+        n = result.n_rows[name]
+        rej = result.rejected(name)
+        parts["time_tai_ns"].append(np.asarray(cols["time_tai_ns"], dtype=np.int64))
+        parts["stream"].append(np.full(n, name, dtype=object))
+        parts["sensor"].append(np.asarray(cols["sensor"], dtype=object).astype(str).astype(object))
+        parts["key"].append(sample_keys(name, cols))
+        parts["accepted"].append(~rej)
+        parts["reasons"].append(result.reasons(name))
+    if not parts["stream"]:
+        return {"time_tai_ns": np.zeros(0, np.int64), "stream": np.zeros(0, object), "sensor": np.zeros(0, object),
+                "key": np.zeros(0, object), "accepted": np.zeros(0, bool), "reasons": np.zeros(0, object)}
+    return {k: np.concatenate(v) for k, v in parts.items()}
+
+
+def accepted_mask(flags: Mapping[str, ArrayLike], stream: str, cols: Columns) -> NDArray[np.bool_]:
+    """Rows of ``cols`` (a stream's columns) that a stored flags table does not reject.
+
+    flags: the columns of :func:`flags_table` (as stored: time_tai_ns, stream, sensor, key, accepted).
+    A row is rejected when the table has a row with the same (stream, sensor, key, time) and
+    accepted False; rows the table does not know (other window, stream not screened) are kept.
+    """
+    f_stream = np.asarray(flags["stream"]).astype(str)
+    sel = (f_stream == stream) & ~np.asarray(flags["accepted"], dtype=bool)
+    n = len(cols["time_tai_ns"])
+    if not np.any(sel):
+        return np.ones(n, dtype=bool)
+    bad = pd.MultiIndex.from_arrays([np.asarray(flags["sensor"]).astype(str)[sel],
+                                     np.asarray(flags["key"]).astype(str)[sel],
+                                     np.asarray(flags["time_tai_ns"], dtype=np.int64)[sel]])
+    rows = pd.MultiIndex.from_arrays([np.asarray(cols["sensor"]).astype(str), sample_keys(stream, cols).astype(str),
+                                      np.asarray(cols["time_tai_ns"], dtype=np.int64)])
+    return ~np.asarray(rows.isin(bad), dtype=bool)
+
+
+def filter_streams(streams: Mapping[str, Columns], flags: Mapping[str, ArrayLike]) -> dict[str, dict[str, Any]]:
+    """Streams with the rows a flags table rejects removed (streams left empty are dropped)."""
+    out: dict[str, dict[str, Any]] = {}
+    for name, cols in streams.items():
+        keep = accepted_mask(flags, name, cols)
+        if np.any(keep):
+            out[name] = {k: np.asarray(v)[keep] for k, v in cols.items()}
+    return out

@@ -1,0 +1,357 @@
+"""Attitude relative to the orbital frame from star-tracker quaternions and GNSS states (003 §1.6).
+
+003 §1.6 computes the orbital attitude of Meteor-M in three steps: (1) body -> inertial from the
+smoothed star-tracker quaternion q_sm(t) (§1.3) and the mounting; (2) inertial -> Greenwich by the
+sidereal rotation S(t) = S0 + w_e t about X3; (3) Greenwich -> orbital from the GNSS r, v (smoothed,
+errors < 1 m, < 1 mm/s). The orbital frame has axis 3 along the radius vector, axis 2 along the
+orbital angular momentum and axis 1 completing it; the angles are pitch alpha about axis 2, yaw
+beta about the new axis 3 and roll gamma about the resulting axis 1 (processing.attitude.rotations
+.quat_from_pitch_yaw_roll). Paper: |alpha|, |gamma| < 0.4 deg, beta oscillating < 0.3 deg about
+1.0-1.4 deg; fig. 12 plots segments against the time since the preceding ascending node.
+
+Here, with the modern equivalents:
+
+1. q_XS (sensor -> frame X, X = GCRF, EME2000, MOD, TOD or TEME as the star tracker reports) is
+   taken to the GCRS, q_GS = q_GX o q_XS (processing.frames.earth_orientation; the paper's X1X2X3 is MOD). Assuming
+   GCRF quaternions to be MOD -- 003's simplification -- turns them by the precession since J2000
+   (0.33 deg in 2023), which is what the ``inertial_frame`` parameter prevents.
+2. The GNSS ITRF states are smoothed (processing.orbits.gnss_orbit) and taken to the GCRS with
+   IAU 2006/2000A and the given Earth orientation (the full celestial-terrestrial rotation instead of
+   S(t) about X3: the difference, precession-nutation and polar motion, is the size of step 1's).
+3. The orbital frame O from the inertial r, v (``orbital_003`` or ``lvlh_004``,
+   processing.frames.orbital); q_OS = q_GO^-1 o q_GS.
+4. Smoothing (003 §1.3) of the star-tracker attitude. The paper smooths q_IS itself; over 20 min
+   in orbital orientation that attitude turns by ~70 deg and its sine series needs many harmonics
+   (the Rodrigues parameters' coefficients decay as m^-3), which pass on more of the noise. The
+   orbital rotation is known from GNSS, so by default (``smoothing_frame="orbital"``) the same
+   §1.3 smoother -- mean quaternion, Rodrigues parameters z of q_c^-1 o q_n, sine series plus trend
+   per component, harmonic count by GCV -- is applied to q_OS, which moves by a fraction of a degree:
+   the smoothed q_OS(t) is the §1.3 q_sm with the orbital motion as the reference motion.
+   ``smoothing_frame="inertial"`` smooths q_GS as 003 does (for comparison).
+5. q_OB = q_OS o q_BS^-1, angles from q_OB; the body attitude q_GB = q_GO o q_OB (for the AEM).
+
+Inputs: times int64 tai_ns; quaternions scalar first, unit; states ITRF m, m/s. Angles rad.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from processing.attitude import rotations
+from processing.frames.earth_orientation import EarthOrientation, canonical_inertial_frame, inertial_to_gcrs_mat
+from processing.frames.orbital import q_IO_003, q_IO_lvlh_004
+from processing.orbits.gnss_orbit import (
+    EopSource,
+    GnssFit,
+    ascending_nodes,
+    fit_gnss,
+    gnss_to_gcrs,
+    time_since_ascending_node_s,
+)
+from processing.signal.sine_series import fit_sine_series, select_harmonics, sine_series_design
+from processing.star_tracker.accuracy import (
+    mean_quaternion,
+    residual_mrps,
+    sensor_axis_residuals,
+    split_segments,
+)
+
+NS_PER_S = 1_000_000_000
+ORBITAL_FRAMES = ("orbital_003", "lvlh_004")
+MIN_SMOOTHING_SAMPLES = 12
+SEGMENT_MAX_S = 1200.0
+"""003 §1.3: segments of at most 20 min."""
+
+SmoothingFrame = Literal["orbital", "inertial"]
+
+
+class OrbitalAttitudeError(ValueError):
+    """Inputs that do not allow the 003 §1.6 computation; the message says what and why."""
+
+
+@dataclass(frozen=True)
+class SmoothingSegment:
+    """One smoothed segment: sample index range [start, stop), harmonics M of z1, z2, z3 (-1: too few
+    samples, not smoothed), residual rms about the sensor axes x1 x2 x3 [rad] (the smoothing
+    residuals: star-tracker noise + motion the series does not follow, e.g. 003's 0.4 Hz line)."""
+
+    start: int
+    stop: int
+    harmonics: tuple[int, int, int]
+    residual_rms_rad: NDArray
+
+    @property
+    def smoothed(self) -> bool:
+        return min(self.harmonics) >= 0
+
+
+@dataclass(frozen=True)
+class OrbitalAttitude:
+    """Result of :func:`orbital_attitude` (all per-sample arrays over the N star-tracker samples used).
+
+    time_tai_ns (N,); q_GB (N, 4) body attitude in the GCRS (smoothed when smoothing is on); q_OB
+    (N, 4); pitch/yaw/roll_rad (N,) from q_OB (003 §1.6) and *_raw_rad without smoothing;
+    time_since_node_s (N,) ("virtual orbit"); ascending_nodes_tai_ns (K,) found in the GNSS arcs;
+    r_I, v_I (N, 3) GCRS state at the samples; dropped_tai_ns: star-tracker times outside the GNSS
+    coverage (not used); gnss: the orbit fit; segments: smoothing segments (empty if off).
+    """
+
+    time_tai_ns: NDArray
+    q_GB: NDArray
+    q_OB: NDArray
+    pitch_rad: NDArray
+    yaw_rad: NDArray
+    roll_rad: NDArray
+    pitch_raw_rad: NDArray
+    yaw_raw_rad: NDArray
+    roll_raw_rad: NDArray
+    time_since_node_s: NDArray
+    ascending_nodes_tai_ns: NDArray
+    r_I: NDArray
+    v_I: NDArray
+    dropped_tai_ns: NDArray
+    gnss: GnssFit
+    inertial_frame: str
+    orbital_frame: str
+    smoothing: bool
+    smoothing_frame: str
+    segments: tuple[SmoothingSegment, ...] = field(default=())
+
+    def angle_statistics_deg(self, raw: bool = False) -> dict[str, dict[str, float]]:
+        """{pitch_deg, yaw_deg, roll_deg: {mean, std, min, max}} in degrees (the job summary);
+        ``raw``: of the unsmoothed angles. See :func:`angle_stats_deg`."""
+        series = ((self.pitch_raw_rad, self.yaw_raw_rad, self.roll_raw_rad) if raw
+                  else (self.pitch_rad, self.yaw_rad, self.roll_rad))
+        return {name: angle_stats_deg(a) for name, a in zip(("pitch_deg", "yaw_deg", "roll_deg"), series, strict=True)}
+
+
+def angle_stats_deg(a_rad: ArrayLike) -> dict[str, float]:
+    """{mean, std, min, max} [deg] of an angle series, taken on the continuous (unwrapped) series so that
+    an attitude near +-180 deg (e.g. a satellite flying backwards) does not average to 0; the mean is
+    then wrapped into (-180, 180], min and max are those of the continuous series."""
+    d = np.degrees(np.unwrap(np.asarray(a_rad, dtype=np.float64)))
+    mean = float(np.mean(d))
+    wrapped = float((mean + 180.0) % 360.0 - 180.0)
+    shift = wrapped - mean
+    return {"mean": wrapped, "std": float(np.std(d, ddof=1)) if d.size > 1 else 0.0,
+            "min": float(np.min(d) + shift), "max": float(np.max(d) + shift)}
+
+
+def _q_GO(r_I: NDArray, v_I: NDArray, orbital_frame: str) -> NDArray:
+    if orbital_frame == "orbital_003":
+        return q_IO_003(r_I, v_I)
+    if orbital_frame == "lvlh_004":
+        return q_IO_lvlh_004(r_I, v_I)
+    raise OrbitalAttitudeError(f"orbital_frame must be one of {', '.join(ORBITAL_FRAMES)}, got {orbital_frame!r}")
+
+
+def _trend_sines_design(tau: NDArray, trend_degree: int, harmonics: int) -> NDArray:
+    """[P_0(x) .. P_d(x), sin(pi tau) .. sin(pi M tau)] (N, d + 1 + M), x = 2 tau - 1 (Legendre)."""
+    return np.column_stack([np.polynomial.legendre.legvander(2.0 * tau - 1.0, trend_degree),
+                            sine_series_design(tau, harmonics, 0.0, 1.0)[:, 2:]])
+
+
+def fit_trend_sines(t_s: NDArray, y: NDArray, *, trend_degree: int = 3, harmonics: int | None = None,
+                    max_harmonics: int | None = None) -> tuple[NDArray, int]:
+    """Least-squares fit of a degree-d polynomial trend plus the 003 §1.3 sine series to y (N,).
+
+    t_s (N,) [s] increasing; tau = (t - t1)/T. With d = 1 this is 003's a_{M+1} + a_{M+2}(t - t1) +
+    sum a_m sin(pi m tau) (then processing.signal.sine_series does the fit). Why d = 3 is the default for
+    attitude: integrating by parts, the sine coefficients of the detrended signal g are
+    b_m = 2/(m pi) [g(0) - (-1)^m g(T)] - 2 T^2/(m pi)^3 [g''(0) - (-1)^m g''(T)] + O(m^-5); a linear
+    trend removes the first term only, so a slow motion that does not start and end with zero
+    curvature needs ~25-30 harmonics to be followed to 1 arcsec, each passing on noise; a cubic trend
+    also absorbs the end curvature (coefficients ~m^-5) and ~15 harmonics do (seed-003 simulator:
+    pitch error 3.9-4.5" instead of 4.3-5.8", harmonics 12-19 instead of 18-38). M by generalised
+    cross-validation over 0..max_harmonics (default (N - 2)/4) from one Householder QR of the widest
+    design (the columns are nested). Returns (fitted values (N,), M).
+    """
+    n = t_s.size
+    tau = (t_s - t_s[0]) / (t_s[-1] - t_s[0])
+    if trend_degree == 1:
+        cap = max(0, (n - 2) // 4) if max_harmonics is None else max_harmonics
+        m = harmonics if harmonics is not None else select_harmonics(t_s, y, cap, criterion="gcv")[0]
+        m = int(min(m, n - 3))
+        return fit_sine_series(t_s, y, m).fitted, m
+    base = trend_degree + 1
+    cap = max(0, min((n - 2) // 4 if max_harmonics is None else max_harmonics, n - base - 1))
+    top = cap if harmonics is None else int(min(harmonics, n - base - 1))
+    a = _trend_sines_design(tau, trend_degree, top)
+    q, r = np.linalg.qr(a)
+    proj = q.T @ y
+    if harmonics is None:
+        resid0 = float(np.sum((y - q @ proj) ** 2))
+        tail = np.concatenate([np.cumsum((proj ** 2)[::-1])[::-1], [0.0]])
+        ms = np.arange(cap + 1)
+        p = base + ms
+        rss = resid0 + tail[p]
+        score = np.where(n > p, n * rss / np.maximum(n - p, 1) ** 2, np.inf)
+        m = int(ms[int(np.argmin(score))])
+    else:
+        m = top
+    p = base + m
+    coef = np.linalg.solve(r[:p, :p], proj[:p])
+    return a[:, :p] @ coef, m
+
+
+def smooth_attitude(
+    time_tai_ns: NDArray, q: NDArray, *, harmonics: int | None = None, trend_degree: int = 3,
+    segment_max_s: float = SEGMENT_MAX_S, max_gap_s: float = 60.0,
+) -> tuple[NDArray, tuple[SmoothingSegment, ...]]:
+    """003 §1.3 smoothing of an attitude series q (N, 4) (any frame pair); returns q_sm at the samples.
+
+    Per segment (split at gaps > max_gap_s, pieces <= segment_max_s): q_c = mean quaternion, z =
+    Rodrigues parameters of q_c^-1 o q_n, each z_i fitted on its own (003 §1.3; each component has
+    its own noise, the boresight one 5-10x the others, 003 §2.1) by a polynomial trend of degree
+    ``trend_degree`` plus the sine series (:func:`fit_trend_sines`; trend_degree=1 is 003's exact
+    form), M_i by generalised cross-validation -- it minimises the expected error of the fit at the
+    samples, which is what the angles need -- unless ``harmonics`` is given; q_sm = q_c o s(z_fit).
+    Segments with fewer than MIN_SMOOTHING_SAMPLES samples are returned unsmoothed (harmonics -1).
+    """
+    out = q.copy()
+    segs: list[SmoothingSegment] = []
+    for sl in split_segments(time_tai_ns, segment_max_s, max_gap_s):
+        n = sl.stop - sl.start
+        if n < MIN_SMOOTHING_SAMPLES:
+            segs.append(SmoothingSegment(sl.start, sl.stop, (-1, -1, -1), np.full(3, np.nan)))
+            continue
+        t_s = (time_tai_ns[sl] - time_tai_ns[sl.start]).astype(np.float64) / NS_PER_S
+        q_c = mean_quaternion(q[sl])
+        z = residual_mrps(q[sl], q_c)
+        z_fit = np.empty_like(z)
+        ms = []
+        for i in range(3):
+            z_fit[:, i], m = fit_trend_sines(t_s, z[:, i], trend_degree=trend_degree, harmonics=harmonics)
+            ms.append(m)
+        out[sl] = rotations.quat_multiply(q_c, rotations.mrp_to_quat(z_fit))
+        resid = sensor_axis_residuals(z, z_fit)
+        dof = np.maximum(n - (np.asarray(ms) + trend_degree + 1), 1)
+        segs.append(SmoothingSegment(sl.start, sl.stop, (ms[0], ms[1], ms[2]),
+                                     np.sqrt(np.sum(resid ** 2, axis=0) / dof)))
+    return rotations.quat_canonical(out), tuple(segs)
+
+
+def orbital_attitude(
+    time_tai_ns: ArrayLike,
+    q_XS: ArrayLike,
+    gnss_time_tai_ns: ArrayLike,
+    r_E: ArrayLike,
+    v_E: ArrayLike,
+    *,
+    q_BS: ArrayLike = (1.0, 0.0, 0.0, 0.0),
+    inertial_frame: str = "GCRF",
+    orbital_frame: str = "orbital_003",
+    smoothing: bool = True,
+    smoothing_frame: SmoothingFrame = "orbital",
+    harmonics: int | None = None,
+    trend_degree: int = 3,
+    eop: EopSource = None,
+    gnss_method: Literal["chebyshev", "sine"] = "chebyshev",
+    segment_max_s: float = SEGMENT_MAX_S,
+    max_gap_s: float = 60.0,
+    progress: Callable[[float, str], None] | None = None,
+) -> OrbitalAttitude:
+    """Pitch, yaw, roll of 003 §1.6 (module docstring) from star-tracker and GNSS telemetry.
+
+    time_tai_ns (N,) int64 sorted; q_XS (N, 4) sensor -> ``inertial_frame`` quaternions, scalar
+    first; gnss_time_tai_ns (K,), r_E, v_E (K, 3) ITRF [m, m/s]; q_BS (4,) mounting (sensor ->
+    body); eop: EarthOrientation, a callable tai_ns -> EarthOrientation, or None (zero).
+    Star-tracker samples outside the GNSS arcs are dropped (listed in ``dropped_tai_ns``).
+    """
+    report = progress or (lambda f, s: None)
+    t = np.asarray(time_tai_ns, dtype=np.int64)
+    q = np.asarray(q_XS, dtype=np.float64)
+    if t.ndim != 1 or q.shape != (t.size, 4):
+        raise OrbitalAttitudeError(f"expected times (N,) and quaternions (N, 4), got {t.shape} and {q.shape}")
+    if t.size < 2:
+        raise OrbitalAttitudeError(f"need at least 2 star-tracker samples, got {t.size}")
+    if np.any(np.diff(t) <= 0):
+        raise OrbitalAttitudeError("star-tracker times must be strictly increasing")
+    frame = canonical_inertial_frame(inertial_frame)
+    if orbital_frame not in ORBITAL_FRAMES:
+        raise OrbitalAttitudeError(f"orbital_frame must be one of {', '.join(ORBITAL_FRAMES)}, got {orbital_frame!r}")
+    if smoothing_frame not in ("orbital", "inertial"):
+        raise OrbitalAttitudeError(f"smoothing_frame must be 'orbital' or 'inertial', got {smoothing_frame!r}")
+    q_BS_arr = rotations.quat_normalize(np.asarray(q_BS, dtype=np.float64))
+
+    report(0.1, "GNSS orbit fit")
+    fit = fit_gnss(gnss_time_tai_ns, r_E, v_E, method=gnss_method)
+    covered = fit.covered(t)
+    if not np.any(covered):
+        raise OrbitalAttitudeError("no star-tracker sample lies within the GNSS arcs (the two streams do not "
+                                   "overlap in time)")
+    dropped = t[~covered]
+    t, q = t[covered], rotations.quat_normalize(q[covered])
+
+    report(0.3, "frames")
+    eop_t = eop(t) if callable(eop) else (eop or EarthOrientation())
+    q_GX = rotations.dcm_to_quat(inertial_to_gcrs_mat(frame, t, eop_t))
+    q_GS = rotations.quat_multiply(q_GX, q)
+    r_I, v_I, _ = gnss_to_gcrs(fit, t, eop_t)
+    q_GO = _q_GO(r_I, v_I, orbital_frame)
+    q_OG = rotations.quat_conjugate(q_GO)
+    q_SB = rotations.quat_conjugate(q_BS_arr)
+
+    q_OS_raw = rotations.quat_multiply(q_OG, q_GS)
+    q_OB_raw = rotations.quat_canonical(rotations.quat_multiply(q_OS_raw, q_SB))
+    segments: tuple[SmoothingSegment, ...] = ()
+    if smoothing:
+        report(0.5, "smoothing (003 §1.3)")
+        if smoothing_frame == "orbital":
+            q_OS, segments = smooth_attitude(t, q_OS_raw, harmonics=harmonics, trend_degree=trend_degree,
+                                             segment_max_s=segment_max_s, max_gap_s=max_gap_s)
+        else:
+            q_GS_sm, segments = smooth_attitude(t, q_GS, harmonics=harmonics, trend_degree=trend_degree,
+                                                segment_max_s=segment_max_s, max_gap_s=max_gap_s)
+            q_OS = rotations.quat_multiply(q_OG, q_GS_sm)
+        q_OB = rotations.quat_canonical(rotations.quat_multiply(q_OS, q_SB))
+    else:
+        q_OB = q_OB_raw
+
+    report(0.8, "angles and ascending nodes")
+    pitch, yaw, roll = rotations.pitch_yaw_roll_from_quat(q_OB)
+    pitch_raw, yaw_raw, roll_raw = rotations.pitch_yaw_roll_from_quat(q_OB_raw)
+    nodes = ascending_nodes(fit, eop)
+    since = time_since_ascending_node_s(t, r_I, v_I, nodes)
+    q_GB = rotations.quat_canonical(rotations.quat_multiply(q_GO, q_OB))
+    return OrbitalAttitude(
+        time_tai_ns=t, q_GB=q_GB, q_OB=q_OB, pitch_rad=pitch, yaw_rad=yaw, roll_rad=roll,
+        pitch_raw_rad=pitch_raw, yaw_raw_rad=yaw_raw, roll_raw_rad=roll_raw, time_since_node_s=since,
+        ascending_nodes_tai_ns=nodes, r_I=r_I, v_I=v_I, dropped_tai_ns=dropped, gnss=fit,
+        inertial_frame=frame, orbital_frame=orbital_frame, smoothing=smoothing, smoothing_frame=smoothing_frame,
+        segments=segments,
+    )
+
+
+def summary_of(result: OrbitalAttitude) -> dict[str, Any]:
+    """JSON-able figures of a result besides the angle statistics: GNSS fit, smoothing, coverage."""
+    arcsec = np.degrees(1.0) * 3600.0
+    seg = [s for s in result.segments if s.smoothed]
+    w = np.array([s.stop - s.start for s in seg], dtype=float)
+    resid = (np.sqrt(np.sum(w[:, None] * np.stack([s.residual_rms_rad for s in seg]) ** 2, axis=0) / np.sum(w))
+             * arcsec).tolist() if seg else None
+    return {
+        "n_samples": int(result.time_tai_ns.size),
+        "n_dropped_outside_gnss": int(result.dropped_tai_ns.size),
+        "gnss_fit": {
+            "method": result.gnss.method,
+            "n_samples": result.gnss.n_samples,
+            "n_arcs": len(result.gnss.arcs),
+            "position_residual_rms_m": result.gnss.position_rms_m.tolist(),
+            "velocity_residual_rms_m_s": result.gnss.velocity_rms_m_s.tolist(),
+            "degree": [a.degree for a in result.gnss.arcs] if result.gnss.method == "chebyshev" else None,
+            "harmonics": [list(a.harmonics) for a in result.gnss.arcs] if result.gnss.method == "sine" else None,
+        },
+        "smoothing_segments": [{"start_tai_ns": int(result.time_tai_ns[s.start]),
+                                "end_tai_ns": int(result.time_tai_ns[s.stop - 1]),
+                                "n_samples": s.stop - s.start, "harmonics": list(s.harmonics),
+                                "residual_rms_arcsec": (s.residual_rms_rad * arcsec).tolist()}
+                               for s in result.segments],
+        "smoothing_residual_rms_arcsec": resid,
+        "ascending_nodes_tai_ns": [int(x) for x in result.ascending_nodes_tai_ns],
+    }

@@ -1,0 +1,473 @@
+"""Attitude from vector observations with the algorithm chosen per epoch (002, figure 1).
+
+Three body/orbital vector pairs (002, eq. 8):
+- antenna: the GNSS antenna axis, a_B from the configuration (``gnss_antenna_axis_B``) and a_O from
+  the visibility of the navigation satellites (eqs. 5-7, processing.vector_attitude.antenna_axis);
+- magnetometer: the measured field h_B = R(q_BM) h_M and the model field in O (IGRF-14 at the GNSS
+  position, or with ``field_model="dipole"`` the paper's axial dipole of eq. 2, whose directions are
+  off by up to ~15-20 deg in LEO: give it a field_model_error_nT of several thousand nT);
+- sun: the sun vector s_B from the panel currents (I = I_max max(0, n . s), processing.screening.criteria.
+  sun_from_currents) and the Sun direction in O from the ephemeris, in full sunlight only.
+
+Per epoch (figure 1), by which measurements exist and passed the screening (002 eqs. 15-17 and
+the generic checks of processing.screening.criteria):
+- all three -> strongly coupled scheme: Wahba's problem (eq. 8), by default the q-method (eq. 9);
+- magnetometer + antenna -> loosely coupled scheme (eqs. 10-14), or a two-vector Wahba solution when
+  a Wahba method is asked for;
+- magnetometer + sun or antenna + sun -> two-vector Wahba solution (beyond the paper's figure);
+- fewer -> no attitude, the epoch flagged with the reason.
+
+Frames: O is 002's orbital frame (Z2 radial, Y2 orbital angular momentum of the inertial motion,
+X2 = Y2 x Z2), built in ITRF axes from the GNSS state (processing.vector_attitude.antenna_axis.dcm_EO_002). Output
+q_OB (v_O = q_OB o v_B o q_OB^-1) and 002's angles (pitch J, yaw psi, roll phi of matrix (3) = dcm_BO).
+
+Uncertainty: each vector has a direction error sigma_i (rad, per tangential axis): magnetometer
+sqrt(noise^2 + model error^2) / |H|; sun (current noise + model error) / I_max (the sun components of
+a body-axis panel set are I / I_max); antenna ``antenna_sigma_deg``. With weights a_i (default
+1 / sigma_i^2) the covariance of the body-frame rotation-vector error is the sandwich
+P = H^-1 G H^-1, H = sum a_i (I - b_i b_i^T), G = sum a_i^2 sigma_i^2 (I - b_i b_i^T) (= H^-1 for the
+default weights; Shuster & Oh 1981). The loosely coupled solution is given the two-vector P.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from processing.attitude import rotations, wahba
+from processing.environment.dipole import dipole_field_O002_nT
+from processing.frames.earth_orientation import OMEGA_EARTH_RAD_S
+from processing.frames.earth_rotation_interp import gcrs_to_itrs_mat_interp
+from processing.orbits.gnss_ephemeris import satellite_positions_E
+from processing.screening.criteria import (
+    Environment,
+    GnssTrack,
+    ScreeningResult,
+    hermite_state,
+    pivot,
+    sun_from_currents,
+)
+from processing.vector_attitude.antenna_axis import (
+    DEFAULT_CONE_HALF_ANGLE_RAD,
+    DEFAULT_GRAZING_ALTITUDE_M,
+    antenna_axis_O,
+    dcm_EO_002,
+    earth_occulted,
+    line_of_sight_O,
+    refine_antenna_axis_O,
+)
+from processing.vector_attitude.loosely_coupled import loosely_coupled
+
+NS_PER_S = 1_000_000_000
+VECTORS = ("antenna", "magnetometer", "sun")
+METHODS = ("auto", "q_method", "quest", "svd", "esoq2", "loosely_coupled")
+Method = Literal["auto", "q_method", "quest", "svd", "esoq2", "loosely_coupled"]
+CHI2_3_99 = 11.344866730144373
+"""99 % quantile of the chi-square distribution with 3 degrees of freedom."""
+
+
+class VectorAttitudeError(ValueError):
+    """The inputs do not allow any attitude (no orbit, no vectors); the message says what is missing."""
+
+
+@dataclass(frozen=True)
+class VectorAttitudeParams:
+    """Options of :func:`vector_attitude` (see the module docstring for the error model).
+
+    weights: a_i per vector name (antenna, magnetometer, sun); None: 1 / sigma_i^2.
+    antenna_method: "eq7" (the paper's least squares) or "cone" (eq. 7 refined by the maximum-likelihood
+    cone fit of :func:`processing.vector_attitude.antenna_axis.refine_antenna_axis_O`, the default).
+    """
+
+    method: Method = "auto"
+    weights: Mapping[str, float] | None = None
+    field_model: Literal["igrf", "dipole"] = "igrf"
+    magnetometer_noise_nT: float = 100.0
+    field_model_error_nT: float = 150.0
+    current_noise_a: float = 0.02
+    current_model_error_a: float = 0.02
+    antenna_sigma_deg: float = 8.0
+    antenna_method: Literal["eq7", "cone"] = "cone"
+    cone_half_angle_deg: float | None = None
+    grazing_altitude_m: float = DEFAULT_GRAZING_ALTITUDE_M
+    max_time_offset_s: float = 0.6
+    max_interpolation_gap_s: float = 30.0
+    sun_norm_tolerance: float = 0.15
+
+
+@dataclass(frozen=True)
+class Observations:
+    """Vector pairs per epoch: b_B, r_O (T, 3, 3) unit, axis 1 in VECTORS order; available (T, 3);
+    sigma_rad (T, 3); why (T, 3) str: reason a vector is missing ("" when available)."""
+
+    time_tai_ns: NDArray[np.int64]
+    b_B: NDArray[np.float64]
+    r_O: NDArray[np.float64]
+    available: NDArray[np.bool_]
+    sigma_rad: NDArray[np.float64]
+    why: NDArray[np.object_]
+    r_E: NDArray[np.float64]
+    v_E: NDArray[np.float64]
+    antenna_violations: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
+
+
+@dataclass(frozen=True)
+class VectorAttitudeResult:
+    """Per epoch: q_OB (T, 4) NaN where none; pitch/yaw/roll_rad (T,) of matrix (3); method (T,) str
+    ("none" where no attitude); loss (T,) of eq. 8 with the weights used; covariance_rad2 (T, 3, 3)
+    body-frame error covariance; residual_rad (T, 3) angle between b_i and dcm_BO r_i (NaN where the
+    vector was not used); used (T, 3) vectors used; reason (T,) why there is no attitude."""
+
+    time_tai_ns: NDArray[np.int64]
+    q_OB: NDArray[np.float64]
+    pitch_rad: NDArray[np.float64]
+    yaw_rad: NDArray[np.float64]
+    roll_rad: NDArray[np.float64]
+    method: NDArray[np.object_]
+    loss: NDArray[np.float64]
+    covariance_rad2: NDArray[np.float64]
+    residual_rad: NDArray[np.float64]
+    used: NDArray[np.bool_]
+    reason: NDArray[np.object_]
+
+    @property
+    def ok(self) -> NDArray[np.bool_]:
+        return self.method != "none"
+
+    def bound_rad(self, quantile_chi2: float = CHI2_3_99) -> NDArray[np.float64]:
+        """Per-epoch bound on the total error angle: sqrt(chi2 quantile * largest eigenvalue of P)."""
+        ev = np.full(self.time_tai_ns.size, np.nan)
+        good = np.isfinite(self.covariance_rad2).all(axis=(1, 2))
+        if np.any(good):
+            ev[good] = np.linalg.eigvalsh(self.covariance_rad2[good])[:, -1]
+        return np.sqrt(quantile_chi2 * ev)
+
+
+def _match(t_epochs: NDArray[np.int64], t_samples: NDArray[np.int64], tol_s: float) -> NDArray[np.int64]:
+    """Index of the nearest sample (sorted t_samples) to each epoch within tol_s, else -1."""
+    if t_samples.size == 0:
+        return np.full(t_epochs.size, -1, dtype=np.int64)
+    k = np.clip(np.searchsorted(t_samples, t_epochs), 1, max(1, t_samples.size - 1))
+    if t_samples.size == 1:
+        k = np.zeros(t_epochs.size, dtype=np.int64)
+        best = k
+    else:
+        left = k - 1
+        best = np.where(np.abs(t_epochs - t_samples[left]) <= np.abs(t_samples[k] - t_epochs), left, k)
+    ok = np.abs(t_samples[best] - t_epochs) <= tol_s * NS_PER_S
+    return np.where(ok, best, -1)
+
+
+def _accepted(screening: ScreeningResult | None, stream: str, n: int) -> NDArray[np.bool_]:
+    if screening is None or stream not in screening.n_rows:
+        return np.ones(n, dtype=bool)
+    return ~screening.rejected(stream)
+
+
+def _unit(x: NDArray[np.float64]) -> NDArray[np.float64]:
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return x / np.linalg.norm(x, axis=-1, keepdims=True)
+
+
+def observations(streams: Mapping[str, Mapping[str, NDArray[Any]]], config: Mapping[str, Any],
+                 params: VectorAttitudeParams | None = None, *, nav: Mapping[str, Any] | None = None,
+                 screening: ScreeningResult | None = None, env: Environment | None = None,
+                 time_tai_ns: ArrayLike | None = None) -> Observations:
+    """Body and orbital vectors at each epoch from the streams (rows rejected by ``screening`` unused).
+
+    Epochs: ``time_tai_ns`` if given, else the magnetometer times, else the panel-current times, else
+    the visibility times. The orbit comes from the GNSS stream (accepted rows, cubic Hermite); nav
+    (rinex_nav columns) is needed for the antenna vector.
+    """
+    p = params or VectorAttitudeParams()
+    env = env or Environment()
+    if "gnss" not in streams or len(streams["gnss"]["time_tai_ns"]) < 2:
+        raise VectorAttitudeError("vector attitude needs the GNSS stream (the orbital frame and the models)")
+    g = streams["gnss"]
+    g_ok = _accepted(screening, "gnss", len(g["time_tai_ns"]))
+    order = np.argsort(np.asarray(g["time_tai_ns"], dtype=np.int64)[g_ok], kind="stable")
+    tg = np.asarray(g["time_tai_ns"], dtype=np.int64)[g_ok][order]
+    track = GnssTrack(tg, np.stack([np.asarray(g[c], float)[g_ok][order] for c in ("x", "y", "z")], axis=1),
+                      np.stack([np.asarray(g[c], float)[g_ok][order] for c in ("vx", "vy", "vz")], axis=1))
+    if time_tai_ns is not None:
+        t = np.asarray(time_tai_ns, dtype=np.int64)
+    else:
+        for name in ("magnetometer", "panel_currents", "gnss_visibility"):
+            if name in streams and len(streams[name]["time_tai_ns"]):
+                t = np.unique(np.asarray(streams[name]["time_tai_ns"], dtype=np.int64))
+                break
+        else:
+            raise VectorAttitudeError("no magnetometer, panel_currents or gnss_visibility samples in the window")
+    n = t.size
+    r_E, v_E = hermite_state(track.time_tai_ns, track.r_E, track.v_E, t, p.max_interpolation_gap_s)
+    have_orbit = np.isfinite(r_E).all(axis=1)
+    r_safe = np.where(have_orbit[:, None], r_E, [7e6, 0.0, 0.0])
+    v_safe = np.where(have_orbit[:, None], v_E, [0.0, 7.5e3, 0.0])
+    dcm_EO = dcm_EO_002(r_safe, v_safe)
+    b_B = np.full((n, 3, 3), np.nan)
+    r_O = np.full((n, 3, 3), np.nan)
+    sigma = np.full((n, 3), np.nan)
+    why = np.full((n, 3), "", dtype=object)
+    why[~have_orbit, :] = "no GNSS orbit"
+
+    # Magnetometer.
+    if "magnetometer" in streams and len(streams["magnetometer"]["time_tai_ns"]):
+        m = streams["magnetometer"]
+        ok_rows = _accepted(screening, "magnetometer", len(m["time_tai_ns"]))
+        tm = np.asarray(m["time_tai_ns"], dtype=np.int64)
+        o = np.argsort(tm, kind="stable")
+        k = _match(t, tm[o], p.max_time_offset_s)
+        rows = np.where(k >= 0, o[np.maximum(k, 0)], -1)
+        h_M = np.stack([np.asarray(m[c], float) for c in ("bx", "by", "bz")], axis=1)
+        q_BM = np.asarray((config.get("magnetometer") or {}).get("q_BM", [1, 0, 0, 0]), dtype=float)
+        h_B = rotations.quat_rotate(q_BM, h_M)
+        present = rows >= 0
+        accepted = present & ok_rows[np.maximum(rows, 0)]
+        use = accepted & have_orbit
+        if np.any(use):
+            if p.field_model == "dipole":
+                B_O = dipole_field_O(r_E[use], v_E[use])
+            else:
+                B_O = np.einsum("nji,nj->ni", dcm_EO[use], env.field_E_nT(r_E[use], t[use]))
+            b_B[use, 1] = _unit(h_B[rows[use]])
+            r_O[use, 1] = _unit(B_O)
+            sigma[use, 1] = np.hypot(p.magnetometer_noise_nT, p.field_model_error_nT) / np.linalg.norm(B_O, axis=1)
+        why[~present & have_orbit, 1] = "no magnetometer sample"
+        why[present & ~accepted & have_orbit, 1] = "magnetometer sample rejected"
+    else:
+        why[have_orbit, 1] = "no magnetometer stream"
+
+    # Sun from the panel currents, in full sunlight.
+    panels = config.get("solar_panels") or []
+    if "panel_currents" in streams and len(streams["panel_currents"]["time_tai_ns"]) and panels:
+        pc = streams["panel_currents"]
+        normals = np.array([q["normal_B"] for q in panels], dtype=float)
+        imax = np.array([q["max_current_a"] for q in panels], dtype=float)
+        ok_rows = _accepted(screening, "panel_currents", len(pc["time_tai_ns"]))
+        tp = np.asarray(pc["time_tai_ns"], dtype=np.int64)
+        panel = np.asarray(pc["panel"], dtype=np.int64)
+        epochs, keys, index = pivot(tp, panel)
+        valid_keys = (keys >= 0) & (keys < imax.size)
+        keys, index = keys[valid_keys], index[:, valid_keys]
+        cur = np.full(index.shape, np.nan)
+        cur[index >= 0] = np.where(ok_rows[index[index >= 0]], np.asarray(pc["current_a"], float)[index[index >= 0]],
+                                   np.nan)
+        complete = np.isfinite(cur).all(axis=1) & (keys.size == imax.size)
+        s_raw, determined = sun_from_currents(cur, normals[keys], imax[keys], lit_threshold_a=p.current_noise_a * 3)
+        k = _match(t, epochs, p.max_time_offset_s)
+        present = k >= 0
+        kk = np.maximum(k, 0)
+        r_I_sun = env.sun_position_I_m(t)
+        use0 = present & have_orbit
+        nu = np.full(n, np.nan)
+        s_O = np.full((n, 3), np.nan)
+        if np.any(use0):
+            m_EI = gcrs_to_itrs_mat_interp(t[use0])
+            r_I = np.einsum("nji,nj->ni", m_EI, r_E[use0])
+            nu[use0] = env.sunlit_fraction(r_I, r_I_sun[use0])
+            s_I = _unit(r_I_sun[use0] - r_I)
+            s_E = np.einsum("nij,nj->ni", m_EI, s_I)
+            s_O[use0] = np.einsum("nji,nj->ni", dcm_EO[use0], s_E)
+        norm = np.linalg.norm(s_raw, axis=1)
+        consistent = np.abs(norm - 1.0) <= p.sun_norm_tolerance
+        sunlit = np.nan_to_num(nu) >= 1.0
+        use = use0 & sunlit & complete[kk] & determined[kk] & consistent[kk]
+        b_B[use, 2] = _unit(s_raw[kk[use]])
+        r_O[use, 2] = s_O[use]
+        sigma[use, 2] = (p.current_noise_a + p.current_model_error_a) / float(np.min(imax))
+        why[~present & have_orbit, 2] = "no panel currents"
+        why[use0 & ~sunlit, 2] = "Earth shadow"
+        why[use0 & sunlit & ~complete[kk], 2] = "panel current missing or rejected"
+        why[use0 & sunlit & complete[kk] & ~(determined[kk] & consistent[kk]), 2] = "currents do not determine the sun"
+    else:
+        why[have_orbit, 2] = "no panel currents or no solar_panels configuration"
+
+    # Antenna axis from visibility.
+    violations = np.full(n, np.nan)
+    if nav is None:
+        why[have_orbit, 0] = "no navigation data (rinex_nav)"
+    elif "gnss_visibility" not in streams or not len(streams["gnss_visibility"]["time_tai_ns"]):
+        why[have_orbit, 0] = "no gnss_visibility stream"
+    else:
+        vis = streams["gnss_visibility"]
+        ok_rows = _accepted(screening, "gnss_visibility", len(vis["time_tai_ns"]))
+        tv = np.asarray(vis["time_tai_ns"], dtype=np.int64)
+        sat = np.array([f"{s}{int(x):02d}" for s, x in zip(np.asarray(vis["system"]), np.asarray(vis["prn"]),
+                                                           strict=True)])
+        visible = np.asarray(vis["visible"], dtype=bool) & ok_rows
+        systems = sorted({s[0] for s in sat})
+        names = sorted({str(s) for s in np.asarray(nav["sat"]).astype(str) if s[0] in systems})
+        v_epochs = np.unique(tv)
+        k = _match(t, v_epochs, p.max_time_offset_s)
+        present = (k >= 0) & have_orbit
+        if np.any(present):
+            ve, inv = np.unique(v_epochs[k[present]], return_inverse=True)
+            pos = satellite_positions_E(nav, ve, names)
+            rv, vv = hermite_state(track.time_tai_ns, track.r_E, track.v_E, ve, p.max_interpolation_gap_s)
+            good_orbit = np.isfinite(rv).all(axis=1)
+            known = pos.valid & good_orbit[:, None]
+            rv = np.where(good_orbit[:, None], rv, [7e6, 0.0, 0.0])
+            vv = np.where(good_orbit[:, None], vv, [0.0, 7.5e3, 0.0])
+            los = line_of_sight_O(pos.r_E, rv, dcm_EO_002(rv, vv))
+            name_idx = {s: i for i, s in enumerate(names)}
+            row_epoch = np.searchsorted(ve, tv)
+            in_window = (row_epoch < ve.size) & (ve[np.minimum(row_epoch, ve.size - 1)] == tv)
+            sel = in_window & visible & np.isin(sat, names)
+            vis_mat = np.zeros((ve.size, len(names)), bool)
+            vis_mat[row_epoch[sel], [name_idx[s] for s in sat[sel]]] = True
+            cone = np.deg2rad(p.cone_half_angle_deg if p.cone_half_angle_deg is not None else
+                              float(config.get("gnss_antenna_cone_half_angle_deg",
+                                               np.degrees(DEFAULT_CONE_HALF_ANGLE_RAD))))
+            radius = np.linalg.norm(rv, axis=1)
+            res = antenna_axis_O(los, vis_mat, known, radius, cone_half_angle_rad=cone,
+                                 grazing_altitude_m=p.grazing_altitude_m)
+            a_O = res.a_O
+            if p.antenna_method == "cone":
+                occ = earth_occulted(los, radius, p.grazing_altitude_m)
+                a_O = refine_antenna_axis_O(los, vis_mat, known & (vis_mat | ~occ), a_O, cone)
+            good_u = res.ok & np.isfinite(a_O).all(axis=1)
+            idx = np.flatnonzero(present)
+            good = good_u[inv]
+            a_B = np.asarray(config.get("gnss_antenna_axis_B", [1.0, 0.0, 0.0]), dtype=float)
+            b_B[idx[good], 0] = _unit(a_B)
+            r_O[idx[good], 0] = a_O[inv][good]
+            sigma[idx[good], 0] = np.deg2rad(p.antenna_sigma_deg)
+            violations[idx] = res.n_violations[inv]
+            why[idx[~good], 0] = "too few navigation satellites for the antenna axis"
+        why[(k < 0) & have_orbit, 0] = "no visibility report"
+    available = np.isfinite(b_B).all(axis=2) & np.isfinite(r_O).all(axis=2) & np.isfinite(sigma)
+    return Observations(time_tai_ns=t, b_B=b_B, r_O=r_O, available=available, sigma_rad=sigma, why=why,
+                        r_E=r_E, v_E=v_E, antenna_violations=violations)
+
+
+def dipole_field_O(r_E: ArrayLike, v_E: ArrayLike) -> NDArray[np.float64]:
+    """002 eq. 2 (axial dipole, processing.environment.dipole) in the orbital frame of 002, nT.
+
+    The inclination i and argument of latitude u are those of the osculating orbit relative to the
+    Earth's axis (the ITRF z axis), from r_E and the inertial velocity v_E + w x r_E; exact for the
+    axial dipole whatever the orbit's node. r_E, v_E: (N, 3) m, m/s ITRF.
+    """
+    r = np.asarray(r_E, dtype=np.float64)
+    v = np.asarray(v_E, dtype=np.float64) + np.cross([0.0, 0.0, OMEGA_EARTH_RAD_S], r)
+    h = np.cross(r, v)
+    h_unit = _unit(h)
+    inc = np.arccos(np.clip(h_unit[:, 2], -1.0, 1.0))
+    node = _unit(np.stack([-h[:, 1], h[:, 0], np.zeros(len(h))], axis=1))  # z x h
+    u = np.arctan2(np.sum(r * np.cross(h_unit, node), axis=1), np.sum(r * node, axis=1))
+    return dipole_field_O002_nT(np.linalg.norm(r, axis=1), inc, u)
+
+
+def select_methods(available: ArrayLike, method: str = "auto") -> NDArray[np.object_]:
+    """Figure 1 of 002: the algorithm per epoch from which vectors (antenna, magnetometer, sun) exist.
+
+    available: (T, 3) bool. method: "auto" or a forced algorithm. Returns (T,) names: a Wahba method
+    (strongly coupled with three vectors, two-vector solution with two), "loosely_coupled", or "none".
+    """
+    av = np.asarray(available, dtype=bool)
+    if method not in METHODS:
+        raise VectorAttitudeError(f"unknown method {method!r}; expected one of {', '.join(METHODS)}")
+    ant, mag, sun = av[:, 0], av[:, 1], av[:, 2]
+    n_vec = av.sum(axis=1)
+    out = np.full(av.shape[0], "none", dtype=object)
+    if method == "loosely_coupled":
+        out[ant & mag] = "loosely_coupled"
+        return out
+    wahba_name = "q_method" if method == "auto" else method
+    out[n_vec >= 2] = wahba_name
+    if method == "auto":
+        out[ant & mag & ~sun] = "loosely_coupled"
+    return out
+
+
+def _sandwich(b: NDArray[np.float64], w: NDArray[np.float64], sigma: NDArray[np.float64]) -> NDArray[np.float64]:
+    """P = H^-1 G H^-1 with H = sum a (I - b b^T), G = sum a^2 sigma^2 (I - b b^T); (T, 3, 3), NaN if singular."""
+    proj = np.eye(3) - b[..., :, None] * b[..., None, :]
+    h = np.einsum("tn,tnij->tij", w, proj)
+    g = np.einsum("tn,tnij->tij", w * w * np.nan_to_num(sigma) ** 2, proj)
+    det = np.linalg.det(h)
+    scale = np.maximum(w.sum(axis=1), 1e-300) ** 3
+    ok = det > 1e-10 * scale
+    hinv = np.linalg.inv(np.where(ok[:, None, None], h, np.eye(3)))
+    p = hinv @ g @ hinv
+    return np.where(ok[:, None, None], p, np.nan)
+
+
+def vector_attitude(obs: Observations, params: VectorAttitudeParams | None = None) -> VectorAttitudeResult:
+    """Attitude per epoch by the algorithm of :func:`select_methods` (002, figure 1, eqs. 8-14)."""
+    p = params or VectorAttitudeParams()
+    n = obs.time_tai_ns.size
+    methods = select_methods(obs.available, p.method)
+    if p.weights is not None:
+        unknown = set(p.weights) - set(VECTORS)
+        if unknown:
+            raise VectorAttitudeError(f"weights for unknown vectors {sorted(unknown)}; expected {list(VECTORS)}")
+        w_fixed = np.array([float(p.weights.get(v, 0.0)) for v in VECTORS])
+        w = np.broadcast_to(w_fixed, (n, 3)).copy()
+    else:
+        with np.errstate(divide="ignore"):
+            w = 1.0 / obs.sigma_rad**2
+    w = np.where(obs.available, np.nan_to_num(w, posinf=0.0), 0.0)
+    q_BO = np.full((n, 4), np.nan)
+    used = np.zeros((n, 3), bool)
+    b_safe = np.where(np.isfinite(obs.b_B), obs.b_B, 0.0)
+    r_safe = np.where(np.isfinite(obs.r_O), obs.r_O, 0.0)
+    for name in ("q_method", "quest", "svd", "esoq2"):
+        sel = methods == name
+        if np.any(sel):
+            res = wahba.solve(name, b_safe[sel], r_safe[sel], w[sel], covariance=False)
+            q_BO[sel] = res.q
+            used[sel] = w[sel] > 0
+    sel = methods == "loosely_coupled"
+    if np.any(sel):
+        a_B = obs.b_B[sel, 0]
+        # the antenna axis in B is the same at every epoch (configuration)
+        res_lc = loosely_coupled(obs.r_O[sel, 0], obs.b_B[sel, 1], obs.r_O[sel, 1], a_B[0])
+        q_BO[sel] = res_lc.q_BO
+        used[sel, 0] = used[sel, 1] = True
+        failed = np.flatnonzero(sel)[~res_lc.ok]
+        methods[failed] = "none"
+        used[failed] = False
+    have = np.isfinite(q_BO).all(axis=1)
+    methods[~have] = "none"
+    wu = np.where(used, w, 0.0)
+    cov = _sandwich(b_safe, wu, obs.sigma_rad)
+    cov[~have] = np.nan
+    dcm_BO = rotations.quat_to_dcm(np.where(have[:, None], q_BO, [1.0, 0, 0, 0]))
+    pred = np.einsum("tij,tnj->tni", dcm_BO, r_safe)
+    cosr = np.clip(np.einsum("tni,tni->tn", pred, b_safe), -1.0, 1.0)
+    residual = np.where(used & have[:, None], np.arccos(cosr), np.nan)
+    loss = np.where(have, np.sum(wu * np.sum((b_safe - pred) ** 2, axis=2), axis=1), np.nan)
+    q_OB = np.where(have[:, None], rotations.quat_canonical(rotations.quat_conjugate(
+        np.where(have[:, None], q_BO, [1.0, 0, 0, 0]))), np.nan)
+    pitch, yaw, roll = rotations.angles_002_from_dcm(dcm_BO)
+    nan = np.where(have, 0.0, np.nan)
+    reason = np.full(n, "", dtype=object)
+    missing = ~have
+    if np.any(missing):
+        reason[missing] = ["; ".join(f"{v}: {obs.why[i, j] or 'not used'}" for j, v in enumerate(VECTORS)
+                                     if not obs.available[i, j]) or "solver failed" for i in np.flatnonzero(missing)]
+    return VectorAttitudeResult(time_tai_ns=obs.time_tai_ns, q_OB=q_OB, pitch_rad=pitch + nan, yaw_rad=yaw + nan,
+                                roll_rad=roll + nan, method=methods, loss=loss, covariance_rad2=cov,
+                                residual_rad=residual, used=used & have[:, None], reason=reason)
+
+
+def attitude_errors(result: VectorAttitudeResult, q_OB_true: ArrayLike) -> tuple[NDArray[np.float64],
+                                                                                  NDArray[np.float64]]:
+    """Error angle (T,) rad and NEES (T,) = d^T P^-1 d of the body-frame rotation-vector error d,
+    for simulations with known truth q_OB_true (T, 4). NaN where there is no attitude."""
+    qt = np.asarray(q_OB_true, dtype=np.float64)
+    have = result.ok
+    q_est = np.where(have[:, None], result.q_OB, [1.0, 0, 0, 0])
+    # body-frame error: q_err = q_BO_est o q_OB_true = q_OB_est^-1 o q_OB_true
+    d = rotations.quat_to_rotvec(rotations.quat_multiply(rotations.quat_conjugate(q_est), qt))
+    angle = np.where(have, np.linalg.norm(d, axis=1), np.nan)
+    good = have & np.isfinite(result.covariance_rad2).all(axis=(1, 2))
+    nees = np.full(have.size, np.nan)
+    if np.any(good):
+        pinv = np.linalg.inv(result.covariance_rad2[good])
+        nees[good] = np.einsum("ti,tij,tj->t", d[good], pinv, d[good])
+    return angle, nees
