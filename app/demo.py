@@ -27,8 +27,8 @@ from processing.simulate.seed002 import simulate_seed002
 from processing.simulate.seed003 import simulate_seed003
 from processing.simulate.seed004 import simulate_seed004
 from processing.time import timescales
+from processing.units import RAD_PER_ARCSEC
 
-ARCSEC_RAD = np.pi / 180 / 3600
 SKIP = {"executor_check"}
 # Limits the reports judge against (003: BOKZ-M about 3", 7", 15-20" per axis; |pitch|, |roll| < 0.4 deg).
 DEMO_SPECIFICATIONS = {"star_tracker_sigma_arcsec": [5.0, 10.0, 25.0], "gyro_bias_max_deg_h": [20.0, 20.0, 20.0],
@@ -66,7 +66,7 @@ def _fmt_result(job: dict[str, Any]) -> str:
 
 
 def _arcsec(values_rad: Any, digits: int) -> list[float]:
-    return [round(float(v), digits) for v in np.asarray(values_rad) / ARCSEC_RAD]
+    return [round(float(v), digits) for v in np.asarray(values_rad) / RAD_PER_ARCSEC]
 
 
 def _count_faults(truth: Any) -> int:

@@ -15,10 +15,10 @@ import time
 import numpy as np
 
 from app.jobs.types.alignment_calibration import JOB
-from processing.simulate.seed000 import ARCSEC_RAD, simulate_seed000
+from processing.simulate.seed000 import simulate_seed000
 from processing.tasks import TaskInputs
+from processing.units import NS_PER_S, RAD_PER_ARCSEC
 
-NS_PER_S = 1_000_000_000
 TARGET_S = 20.0
 
 
@@ -52,8 +52,8 @@ def main() -> None:
     print(f"alignment_calibration end to end: best {best:.2f} s, median {np.median(times):.2f} s over {args.repeat} "
           f"runs ({n_gyro / best:,.0f} increments/s); figures {t_fig:.2f} s")
     print(f"target < {TARGET_S:.0f} s: {'met' if best < TARGET_S else 'NOT met'}")
-    mis_err = (np.array(s["misalignment_rad"], dtype=float) - tr.misalignment_rad) / ARCSEC_RAD
-    drift_err = (np.array(s["drift_rad_s"]) - tr.drift_G_rad_s(args.duration_s)) / ARCSEC_RAD
+    mis_err = (np.array(s["misalignment_rad"], dtype=float) - tr.misalignment_rad) / RAD_PER_ARCSEC
+    drift_err = (np.array(s["drift_rad_s"]) - tr.drift_G_rad_s(args.duration_s)) / RAD_PER_ARCSEC
     print(f"passes {s['iterations']} (converged {s['converged']}), windows {s['calibration_windows']}, "
           f"drift convergence {s['drift_convergence_s']} s")
     print(f"misalignment error [arcsec] {np.round(mis_err, 3)} (sigma {np.round(s['misalignment_sigma_arcsec'], 3)})")

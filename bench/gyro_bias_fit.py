@@ -27,9 +27,10 @@ from scipy.integrate import solve_ivp
 from scipy.optimize import least_squares
 
 from processing.attitude import rotations as rot
-from processing.gyro_calibration.bias_fit import ARCSEC_RAD, GyroBiasFit, fit_gyro_bias
+from processing.gyro_calibration.bias_fit import GyroBiasFit, fit_gyro_bias
 from processing.gyro_calibration.propagation import quat_cumprod, step_quaternions
 from processing.simulate.seed003 import simulate_seed003
+from processing.units import RAD_PER_ARCSEC
 
 T0_NS = 1_900_000_000 * 1_000_000_000
 WEIGHTS = np.array([1.0, 1.0, 0.2])
@@ -80,7 +81,7 @@ def reference_fit(d: dict[str, Any]) -> tuple[np.ndarray, int]:
     z0 = rot.quat_to_mrp(rot.quat_canonical(q_meas[0]))
     # unknowns in natural units, from the first quaternion and Delta = 0: a rotation of the initial attitude
     # (arcsec; a small angle theta has MRP theta/4) and Delta (arcsec/s)
-    unit = np.concatenate([np.full(3, ARCSEC_RAD / 4), np.full(3, ARCSEC_RAD)])
+    unit = np.concatenate([np.full(3, RAD_PER_ARCSEC / 4), np.full(3, RAD_PER_ARCSEC)])
 
     def residuals(x: np.ndarray) -> np.ndarray:
         p = x * unit
@@ -113,8 +114,8 @@ def report(name: str, n: int, seconds: float, fit: GyroBiasFit, delta_true: np.n
     def g(v: np.ndarray, digits: int = 3) -> str:
         return "[" + ", ".join(f"{x:.{digits}g}" for x in v) + "]"
 
-    print(f"         Delta = {g(fit.delta_R_rad_s / ARCSEC_RAD, 5)} \"/s, "
-          f"honest sigma {g(fit.sigma[3:6] / ARCSEC_RAD)}, paper sigma {g(fit.sigma_paper[3:6] / ARCSEC_RAD)}, "
+    print(f"         Delta = {g(fit.delta_R_rad_s / RAD_PER_ARCSEC, 5)} \"/s, "
+          f"honest sigma {g(fit.sigma[3:6] / RAD_PER_ARCSEC)}, paper sigma {g(fit.sigma_paper[3:6] / RAD_PER_ARCSEC)}, "
           f"(est - truth)/sigma {g(err)}")
 
 

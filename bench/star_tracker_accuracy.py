@@ -24,6 +24,8 @@ from __future__ import annotations
 
 import os
 
+from processing.units import R_EARTH_M, RAD_PER_ARCSEC, RAD_PER_DEG
+
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import argparse  # noqa: E402
@@ -32,9 +34,9 @@ import time  # noqa: E402
 import numpy as np  # noqa: E402
 
 from processing.attitude import rotations  # noqa: E402
-from processing.orbits.two_body import R_EARTH_M, sun_synchronous_inclination_rad  # noqa: E402
+from processing.orbits.two_body import sun_synchronous_inclination_rad
 from processing.simulate.orbital_attitude_model import OrbitalAttitudeModel, SinusoidSeries  # noqa: E402
-from processing.simulate.seed003 import ARCSEC_RAD, DEG_RAD, ST_NOISE_STD_003_RAD, mounting_q_BS_003  # noqa: E402
+from processing.simulate.seed003 import ST_NOISE_STD_003_RAD, mounting_q_BS_003
 from processing.star_tracker.accuracy import analyze_star_tracker_accuracy  # noqa: E402
 
 START_TAI_NS = 1_259_661_600 * 1_000_000_000  # 2009-12-01 (the 003 era); any epoch works
@@ -50,15 +52,16 @@ def day_of_quaternions(
     def series(mean_deg: float, amp_deg: float) -> SinusoidSeries:
         periods = np.array([900.0, 420.0, 230.0]) * rng.uniform(0.8, 1.2, 3)
         return SinusoidSeries(
-            mean_rad=mean_deg * DEG_RAD,
-            amplitudes_rad=(*(amp_deg * DEG_RAD * np.array([0.5, 0.3, 0.2])).tolist(), 3.0 * ARCSEC_RAD),
+            mean_rad=mean_deg * RAD_PER_DEG,
+            amplitudes_rad=(*(amp_deg * RAD_PER_DEG * np.array([0.5, 0.3, 0.2])).tolist(), 3.0 * RAD_PER_ARCSEC),
             periods_s=(*periods.tolist(), 2.5),
             phases_rad=tuple(rng.uniform(0, 2 * np.pi, 4).tolist()),
         )
 
     a_m = R_EARTH_M + 830e3
     model = OrbitalAttitudeModel(
-        a_m=a_m, inc_rad=float(sun_synchronous_inclination_rad(a_m)), raan_rad=100 * DEG_RAD, u0_rad=20 * DEG_RAD,
+        a_m=a_m, inc_rad=float(sun_synchronous_inclination_rad(a_m)), raan_rad=100 * RAD_PER_DEG,
+        u0_rad=20 * RAD_PER_DEG,
         pitch=series(0.0, 0.3), yaw=series(1.2, 0.25), roll=series(0.0, 0.3),
     )
     n = int(round(hours * 3600 * rate_hz))
@@ -99,14 +102,14 @@ def main() -> None:
     fast_s, fast_cpu, fast = timed(lambda: analyze_star_tracker_accuracy(t_ns, q_IS, q_BS), args.repeat)
     dense_s, dense_cpu, dense = timed(
         lambda: analyze_star_tracker_accuracy(t_ns, q_IS, q_BS, method="lstsq"), max(1, args.repeat // 2))
-    sig = fast.sigma_rad / ARCSEC_RAD  # type: ignore[attr-defined]
-    sig_dense = dense.sigma_rad / ARCSEC_RAD  # type: ignore[attr-defined]
+    sig = fast.sigma_rad / RAD_PER_ARCSEC  # type: ignore[attr-defined]
+    sig_dense = dense.sigma_rad / RAD_PER_ARCSEC  # type: ignore[attr-defined]
     methods = sorted({s.method for s in fast.segments})  # type: ignore[attr-defined]
     harmonics = fast.harmonics  # type: ignore[attr-defined]
     print(f"segments: {len(harmonics)}, harmonics per segment: min {min(harmonics)} median "
           f"{int(np.median(harmonics))} max {max(harmonics)}, route {methods}")
     print(f"sigma_arcsec (x1 x2 x3): {np.round(sig, 3).tolist()} (simulated 2.5, 5, 15; 0.4 Hz vibration in, "
-          f"no gyro); sigma_smoothing_arcsec {np.round(fast.sigma_smoothing_rad / ARCSEC_RAD, 3).tolist()}")  # type: ignore[attr-defined]
+          f"no gyro); sigma_smoothing_arcsec {np.round(fast.sigma_smoothing_rad / RAD_PER_ARCSEC, 3).tolist()}")  # type: ignore[attr-defined]
     print(f"dense-lstsq route agrees: max |d sigma| = {np.max(np.abs(sig - sig_dense)):.2e} arcsec")
     print(f"end to end ({'/'.join(methods)} route, best of {args.repeat}): {fast_s:.3f} s wall, {fast_cpu:.3f} s CPU"
           f"  [target < 3 s: {'OK' if fast_s < 3.0 else 'MISSED'}]")

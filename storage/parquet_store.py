@@ -28,9 +28,9 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from processing.streams import SENSOR_COLUMN, TIME_COLUMN
+from processing.units import NS_PER_DAY
 from storage.fs import Location, resolve
 
-NS_PER_DAY = 86_400 * 1_000_000_000
 EPOCH_DATE = dt.date(1970, 1, 1)
 TMP_PREFIX = ".tmp-"
 

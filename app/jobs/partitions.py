@@ -25,11 +25,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from processing.tasks import Progress, no_progress
+from processing.units import NS_PER_S
 
 T = TypeVar("T")
 R = TypeVar("R")
 
-NS_PER_S = 1_000_000_000
 
 
 def time_partitions(start_tai_ns: int, end_tai_ns: int, partition_s: float,

@@ -16,10 +16,10 @@ from sqlalchemy.orm import Session
 
 from processing.screening.coverage import find_gaps
 from processing.streams import STREAMS
+from processing.units import NS_PER_S
 from storage.parquet_store import ParquetStore
 from storage.telemetry import read_window
 
-NS_PER_S = 1e9
 GAP_FACTOR = 1.5
 MAX_LISTED_GAPS = 20
 

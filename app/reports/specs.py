@@ -15,8 +15,8 @@ from typing import Annotated, Any
 
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, model_validator
 
-RAD_ARCSEC = 180.0 / math.pi * 3600.0
-RAD_S_DEG_H = 180.0 / math.pi * 3600.0
+from processing.units import ARCSEC_PER_RAD, DEG_H_PER_RAD_S
+
 PPM = 1e6
 AXES = ("x", "y", "z")
 
@@ -193,13 +193,13 @@ def evaluate(job_type: str, summary: Mapping[str, Any] | None, specs: Specificat
                                            stats.get(stat), scale=1.0, unit="deg", lo=lo, hi=hi, absolute=False))
     bias_key = {"gyro_bias_fit": "gyro_bias_rad_s", "alignment_calibration": "drift_rad_s"}.get(job_type)
     if bias_key and specs.gyro_bias_max_deg_h:
-        checks.append(_bound_check("Gyro bias (per axis)", bias_key, summary.get(bias_key), scale=RAD_S_DEG_H,
+        checks.append(_bound_check("Gyro bias (per axis)", bias_key, summary.get(bias_key), scale=DEG_H_PER_RAD_S,
                                    unit="deg/h", lo=None, hi=None, absolute=True,
                                    per_component=specs.gyro_bias_max_deg_h))
     if job_type == "alignment_calibration":
         if specs.misalignment_max_arcsec:
             checks.append(_norm_check("Gyro-to-star-tracker misalignment angle", "misalignment_rad",
-                                      summary.get("misalignment_rad"), scale=RAD_ARCSEC, unit="arcsec",
+                                      summary.get("misalignment_rad"), scale=ARCSEC_PER_RAD, unit="arcsec",
                                       hi=specs.misalignment_max_arcsec))
         if specs.scale_factor_error_max_ppm:
             checks.append(_bound_check("Gyro scale-factor error", "scale_factor_error",

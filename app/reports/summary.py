@@ -15,9 +15,8 @@ from typing import Any
 import numpy as np
 
 from processing.time import timescales
+from processing.units import ARCSEC_PER_RAD, DEG_H_PER_RAD_S
 
-RAD_ARCSEC = 180.0 / math.pi * 3600.0
-RAD_S_DEG_H = 180.0 / math.pi * 3600.0
 STAT_KEYS = ("mean", "std", "rms", "min", "max", "median", "mad", "p05", "p50", "p95", "p99", "n")
 MAX_RECORDS = 200
 AXES: tuple[str, str, str] = ("x", "y", "z")
@@ -93,7 +92,7 @@ def cell(key: str, value: Any) -> str:
 
 def _conversion(key: str) -> tuple[str, float] | None:
     """The name and factor of a second reading in engineers' units, for keys in rad or rad/s."""
-    for suffix, unit, factor in (("_rad_s", "deg/h", RAD_S_DEG_H), ("_rad", "arcsec", RAD_ARCSEC)):
+    for suffix, unit, factor in (("_rad_s", "deg/h", DEG_H_PER_RAD_S), ("_rad", "arcsec", ARCSEC_PER_RAD)):
         if key.endswith(suffix):
             return f"{key[: -len(suffix)]} [{unit}]", factor
     return None

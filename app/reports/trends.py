@@ -19,9 +19,10 @@ import numpy as np
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
-from app.reports.specs import PPM, RAD_ARCSEC, RAD_S_DEG_H, Specifications, lookup
+from app.reports.specs import PPM, Specifications, lookup
 from app.reports.summary import flatten_numbers, iso
 from processing.time import timescales
+from processing.units import ARCSEC_PER_RAD, DEG_H_PER_RAD_S
 from storage.models import Job
 
 if TYPE_CHECKING:  # matplotlib is imported when a trend is drawn, not at start-up
@@ -66,14 +67,14 @@ def _orbital(angle: str) -> Callable[[Specifications], list[tuple[float | None, 
 KEY_METRICS: tuple[Metric, ...] = (
     Metric("star_tracker_accuracy", "sigma_arcsec", "Star-tracker accuracy σ per sensor axis", "arcsec",
            limits=lambda s: _per_axis(s.star_tracker_sigma_arcsec, symmetric=False)),
-    Metric("gyro_bias_fit", "gyro_bias_rad_s", "Gyro offsets (bias, body axes)", "deg/h", RAD_S_DEG_H,
+    Metric("gyro_bias_fit", "gyro_bias_rad_s", "Gyro offsets (bias, body axes)", "deg/h", DEG_H_PER_RAD_S,
            limits=lambda s: _per_axis(s.gyro_bias_max_deg_h, symmetric=True)),
     Metric("alignment_calibration", "misalignment_rad", "Gyro-to-star-tracker misalignment (rotation vector)",
-           "arcsec", RAD_ARCSEC),
+           "arcsec", ARCSEC_PER_RAD),
     Metric("alignment_calibration", "scale_factor_error", "Gyro scale-factor error", "ppm", PPM,
            limits=lambda s: None if s.scale_factor_error_max_ppm is None else
            [(-s.scale_factor_error_max_ppm, s.scale_factor_error_max_ppm)] * 3),
-    Metric("alignment_calibration", "drift_rad_s", "Gyro drift (alignment calibration)", "deg/h", RAD_S_DEG_H,
+    Metric("alignment_calibration", "drift_rad_s", "Gyro drift (alignment calibration)", "deg/h", DEG_H_PER_RAD_S,
            limits=lambda s: _per_axis(s.gyro_bias_max_deg_h, symmetric=True)),
     *(Metric("orbital_attitude", f"{a}_deg", f"Orbital {a} (min, mean, max over each window)", "deg",
              components=("min", "mean", "max"), stats=("min", "mean", "max"), limits=_orbital(a))
@@ -151,7 +152,7 @@ def generic_metrics(job_type: str, jobs: Sequence[Job]) -> list[Metric]:
     out = []
     for key, n in shapes.items():
         scale, unit, title = 1.0, "", key
-        for suffix, u, f in (("_rad_s", "deg/h", RAD_S_DEG_H), ("_rad", "arcsec", RAD_ARCSEC)):
+        for suffix, u, f in (("_rad_s", "deg/h", DEG_H_PER_RAD_S), ("_rad", "arcsec", ARCSEC_PER_RAD)):
             if key.endswith(suffix):
                 scale, unit, title = f, u, f"{key[: -len(suffix)]}"
                 break

@@ -17,9 +17,9 @@ from sqlalchemy.orm import Session
 
 from app.reports.summary import iso
 from processing.time import timescales
+from processing.units import NS_PER_S
 from storage.models import Job, TelemetryFile
 
-NS = 1_000_000_000
 GAP_FACTOR = 1.5
 WIDTH = 1000
 LABEL_W = 190
@@ -84,7 +84,7 @@ def build(session: Session, spacecraft_id: int, start_tai_ns: int | None = None,
     lo = start_tai_ns if start_tai_ns is not None else min(f[0] for fs in files.values() for f in fs)
     hi = end_tai_ns if end_tai_ns is not None else max(f[1] for fs in files.values() for f in fs)
     if hi <= lo:
-        hi = lo + NS
+        hi = lo + NS_PER_S
     rows = []
     for (stream, sensor), fs in sorted(files.items()):
         spans = _merge(fs)
@@ -127,10 +127,10 @@ def _x(t: int, tl: Timeline) -> float:
 
 
 def _ticks(tl: Timeline) -> list[dict[str, Any]]:
-    span_s = (tl.end_tai_ns - tl.start_tai_ns) / NS
+    span_s = (tl.end_tai_ns - tl.start_tai_ns) / NS_PER_S
     step = next((s for s in TICK_STEPS_S if span_s / s <= 8), TICK_STEPS_S[-1])
     epoch = int(timescales.tai_ns_to_epoch_ns([tl.start_tai_ns], "utc")[0])
-    first = -(-epoch // (step * NS)) * step * NS  # first UTC multiple of the step in the view
+    first = -(-epoch // (step * NS_PER_S)) * step * NS_PER_S  # first UTC multiple of the step in the view
     offset = tl.start_tai_ns - epoch  # TAI - UTC in ns (constant enough over a view for placing ticks)
     out = []
     t = first
@@ -138,7 +138,7 @@ def _ticks(tl: Timeline) -> list[dict[str, Any]]:
         text = iso(t + offset)
         label = text[:10] if step >= 86400 else text[5:16].replace("T", " ") if step >= 60 else text[11:19]
         out.append({"x": round(_x(t + offset, tl), 1), "label": label})
-        t += step * NS
+        t += step * NS_PER_S
     return out
 
 
@@ -160,7 +160,7 @@ def geometry(tl: Timeline) -> dict[str, Any]:
                 continue
             x0 = _x(max(a, tl.start_tai_ns), tl)
             gaps.append({"x": round(x0, 2), "w": round(max(2.0, _x(min(b, tl.end_tai_ns), tl) - x0), 2),
-                         "title": f"gap ({source}): {iso(a)} – {iso(b)} ({(b - a) / NS:.6g} s)"})
+                         "title": f"gap ({source}): {iso(a)} – {iso(b)} ({(b - a) / NS_PER_S:.6g} s)"})
         rows.append({"y": y, "label": f"{r.stream} / {r.sensor}", "spans": spans, "gaps": gaps})
     height = TOP + len(tl.rows) * ROW_H + AXIS_H
     return {"width": WIDTH, "height": height, "label_w": LABEL_W, "plot_w": PLOT_W, "row_h": ROW_H, "rows": rows,

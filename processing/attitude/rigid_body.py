@@ -33,7 +33,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from processing.attitude import rotations
-from processing.orbits.two_body import MU_EARTH_M3_S2
+from processing.units import MU_EARTH_M3_S2
 
 __all__ = [
     "DISTURBANCE_004_N_M",

@@ -34,7 +34,8 @@ from processing.environment.igrf import (
     igrf_field_geocentric_nT,
     igrf_field_ned_nT,
 )
-from processing.environment.sun import AU_M, SUN_RADIUS_M, sun_direction_from_I, sun_direction_I, sun_position_I_m
+from processing.environment.sun import SUN_RADIUS_M, sun_direction_from_I, sun_direction_I, sun_position_I_m
+from processing.units import AU_M
 
 __all__ = [
     "AU_M",

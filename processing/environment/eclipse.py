@@ -22,7 +22,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from processing.environment.sun import SUN_RADIUS_M
-from processing.orbits.two_body import R_EARTH_M
+from processing.units import R_EARTH_M
 
 __all__ = [
     "PENUMBRA",

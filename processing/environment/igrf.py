@@ -36,12 +36,13 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from processing.time.timescales import tai_ns_to_jd
+from processing.units import R_EARTH_M, WGS84_F
 
 __all__ = [
     "IGRF_REFERENCE_RADIUS_M",
     "IGRFCoefficients",
     "IGRFValueError",
-    "WGS84_A_M",
+    "R_EARTH_M",
     "WGS84_F",
     "dcm_E_ned",
     "decimal_year_utc",
@@ -58,10 +59,6 @@ __all__ = [
 
 IGRF_REFERENCE_RADIUS_M = 6371.2e3
 """Geomagnetic reference radius a of the IGRF [m]."""
-WGS84_A_M = 6378137.0
-"""WGS 84 equatorial radius [m] (geodetic helpers, via ERFA's WGS84 ellipsoid)."""
-WGS84_F = 1.0 / 298.257223563
-"""WGS 84 flattening."""
 POLE_GUARD_RAD = 1e-9
 """Colatitudes closer than this to 0 or pi are moved to this distance from the pole."""
 

@@ -29,7 +29,8 @@ import erfa
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from processing.time.timescales import NS_PER_DAY, TT_MINUS_TAI_NS, UNIX_EPOCH_JD
+from processing.time.timescales import TT_MINUS_TAI_NS, UNIX_EPOCH_JD
+from processing.units import AU_M, NS_PER_DAY
 
 __all__ = [
     "AU_M",
@@ -40,8 +41,6 @@ __all__ = [
     "sun_position_I_m",
 ]
 
-AU_M = 149_597_870_700.0
-"""Astronomical unit [m] (IAU 2012 Resolution B2)."""
 SUN_RADIUS_M = 695_700_000.0
 """Nominal solar radius [m] (IAU 2015 Resolution B3)."""
 NODE_STEP_S = 3600

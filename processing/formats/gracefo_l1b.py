@@ -36,8 +36,8 @@ import yaml
 from numpy.typing import NDArray
 
 from processing.time import timescales
+from processing.units import NS_PER_S
 
-NS_PER_S = 1_000_000_000
 END_OF_HEADER = "# End of YAML header"
 GPS_EPOCH_2000_TAI_NS = int(timescales.iso_to_tai_ns(np.array(["2000-01-01T12:00:00"], dtype=object), "gps")[0])
 """tai_ns of 2000-01-01T12:00:00 GPS (= 11:59:47 UTC), the origin of GRACE-FO L1B times."""

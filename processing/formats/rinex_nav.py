@@ -34,8 +34,8 @@ from numpy.typing import NDArray
 from processing.orbits.gnss_systems import DEFAULT_MAX_AGE_S, KEPLER_SYSTEMS
 from processing.tasks import ParsedReference
 from processing.time import timescales
+from processing.units import NS_PER_S
 
-NS_PER_S = 1_000_000_000
 GPS_MINUS_TAI_NS = -19 * NS_PER_S
 BDT_MINUS_TAI_NS = -33 * NS_PER_S
 _ORBIT_LINES = {"G": 7, "E": 7, "J": 7, "C": 7, "I": 7, "R": 3, "S": 3}

@@ -28,11 +28,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from processing.time.timescales import tai_ns_to_jd, tai_ns_to_ut1_jd
-
-OMEGA_EARTH_RAD_S = 7.292115e-5
-"""Nominal mean angular velocity of the Earth [rad/s] (WGS 84 value, also IERS Conventions 2010
-table 1.1). The rate of the Earth rotation angle itself is 2 pi * 1.00273781191135448 / 86400 =
-7.2921151467e-5 rad/s; the 1.5e-13 rad/s difference is ~1e-6 m/s at LEO radius."""
+from processing.units import OMEGA_EARTH_RAD_S
 
 earth_rotation_rate_rad_s = OMEGA_EARTH_RAD_S
 """Alias of :data:`OMEGA_EARTH_RAD_S`."""

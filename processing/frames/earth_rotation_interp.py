@@ -18,8 +18,9 @@ import erfa
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from processing.frames.earth_orientation import OMEGA_EARTH_RAD_S, EarthOrientation
-from processing.time.timescales import NS_PER_DAY, TT_MINUS_TAI_NS, UNIX_EPOCH_JD, tai_ns_to_ut1_jd
+from processing.frames.earth_orientation import EarthOrientation
+from processing.time.timescales import TT_MINUS_TAI_NS, UNIX_EPOCH_JD, tai_ns_to_ut1_jd
+from processing.units import NS_PER_DAY, OMEGA_EARTH_RAD_S
 
 __all__ = ["gcrs_to_itrs_mat_interp", "itrs_to_gcrs_state_interp"]
 

@@ -34,10 +34,8 @@ from numpy.typing import ArrayLike, NDArray
 from processing.frames.earth_orientation import EarthOrientation
 from processing.tasks import ParsedReference
 from processing.time import timescales
+from processing.units import NS_PER_S, RAD_PER_ARCSEC
 
-ARCSEC_RAD = np.pi / (180.0 * 3600.0)
-MAS_RAD = ARCSEC_RAD / 1000.0
-NS_PER_S = 1_000_000_000
 MJD_UNIX_EPOCH = 40587.0
 MIN_LINE_LENGTH = 68  # through the Bulletin A UT1-UTC field
 
@@ -245,7 +243,7 @@ def interpolate_eop(columns: Mapping[str, ArrayLike], tai_ns: ArrayLike, source:
     dut1 = v[:, 2] + timescales.tai_minus_utc_s(tq).astype(np.float64)
     return EarthOrientation(
         dut1_s=dut1.reshape(shape),
-        xp_rad=(v[:, 0] * ARCSEC_RAD).reshape(shape),
-        yp_rad=(v[:, 1] * ARCSEC_RAD).reshape(shape),
+        xp_rad=(v[:, 0] * RAD_PER_ARCSEC).reshape(shape),
+        yp_rad=(v[:, 1] * RAD_PER_ARCSEC).reshape(shape),
         source=source,
     )

@@ -54,9 +54,10 @@ from processing.gyro_calibration.propagation import (
     mrp_pseudo_derivatives,
     propagate,
 )
+from processing.units import RAD_PER_ARCSEC
 
 __all__ = [
-    "ARCSEC_RAD",
+    "RAD_PER_ARCSEC",
     "MOUNTING_SIGMA_MAX_RAD",
     "GyroBiasFit",
     "GyroBiasFitError",
@@ -67,8 +68,7 @@ __all__ = [
     "subinterval_edges",
 ]
 
-ARCSEC_RAD = np.pi / (180.0 * 3600.0)
-MOUNTING_SIGMA_MAX_RAD = 60.0 * ARCSEC_RAD
+MOUNTING_SIGMA_MAX_RAD = 60.0 * RAD_PER_ARCSEC
 """A mounting estimate is reported only when every component's honest sigma is below this (1 arcmin)."""
 MOUNTING_CONDITION_MAX = 1e12
 """... and the correlation-scaled normal matrix is better conditioned than this."""
@@ -549,8 +549,8 @@ def _solve(
         reasons = []
         if np.any(sig_mu > mounting_sigma_max_rad):
             reasons.append(
-                f"mounting sigma {np.round(sig_mu / ARCSEC_RAD, 1).tolist()} arcsec exceeds "
-                f"{mounting_sigma_max_rad / ARCSEC_RAD:.1f} arcsec"
+                f"mounting sigma {np.round(sig_mu / RAD_PER_ARCSEC, 1).tolist()} arcsec exceeds "
+                f"{mounting_sigma_max_rad / RAD_PER_ARCSEC:.1f} arcsec"
             )
         if cond > MOUNTING_CONDITION_MAX:
             reasons.append(f"normal matrix condition number {cond:.3g} exceeds {MOUNTING_CONDITION_MAX:.0e}")

@@ -64,6 +64,7 @@ from processing.signal.two_pass_filter import (
     plan_substeps,
     two_pass_filter,
 )
+from processing.units import RAD_PER_ARCSEC, RAD_PER_DEG
 
 __all__ = [
     "CalibrationError",
@@ -77,8 +78,6 @@ __all__ = [
 ]
 
 FloatArray = NDArray[np.float64]
-ARCSEC_RAD = np.pi / 648000.0
-DEG_RAD = np.pi / 180.0
 
 
 class CalibrationError(ValueError):
@@ -107,7 +106,7 @@ class CalibrationSettings:
 
     t_r_s: float = 200.0
     xi: float = 0.95
-    rate_threshold_rad_s: float = 1.0 * DEG_RAD
+    rate_threshold_rad_s: float = 1.0 * RAD_PER_DEG
     window_min: int = 12
     window_max: int = 18
     output_period_s: float = 0.125
@@ -118,8 +117,8 @@ class CalibrationSettings:
     acquisition: bool = True
     estimate_drift_offset: bool = True
     min_spread: float = 0.02
-    max_misalignment_sigma_rad: float = 10.0 * ARCSEC_RAD
-    convergence_tolerance_rad_s: float = 0.01 * ARCSEC_RAD
+    max_misalignment_sigma_rad: float = 10.0 * RAD_PER_ARCSEC
+    convergence_tolerance_rad_s: float = 0.01 * RAD_PER_ARCSEC
     window_outlier_factor: float = 1.5
     lag_compensation: bool = True
 
@@ -272,7 +271,7 @@ def calibrate_gyro(
     if starts.size < 3:
         raise CalibrationError(
             f"only {starts.size} alignment windows of {cfg.window_min}..{cfg.window_max} samples with "
-            f"|w| <= {cfg.rate_threshold_rad_s / DEG_RAD:g} deg/s; at least 3 are needed"
+            f"|w| <= {cfg.rate_threshold_rad_s / RAD_PER_DEG:g} deg/s; at least 3 are needed"
         )
     windows = star_tracker_window_rates(t_st, q_st, starts, stops, t_p_s=cfg.output_period_s)
     rms = np.linalg.norm(windows.residual_rms_rad, axis=1)

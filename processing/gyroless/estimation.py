@@ -23,7 +23,6 @@ Pipeline (pure, arrays in, dataclass out):
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -41,7 +40,7 @@ from processing.frames.earth_rotation_interp import itrs_to_gcrs_state_interp
 from processing.frames.orbital import dcm_IO_lvlh_004
 from processing.gyroless.ekf import FilterRun, FilterTuning, GyrolessInputs, run_filter, triad_q_OB
 from processing.gyroless.rts_smoother import SmoothedRun, rts_smooth
-from processing.orbits.two_body import MU_EARTH_M3_S2
+from processing.units import MU_EARTH_M3_S2, NS_PER_S, RAD_PER_DEG
 
 __all__ = [
     "GyrolessError",
@@ -53,8 +52,6 @@ __all__ = [
     "prepare_gyroless_inputs",
 ]
 
-NS_PER_S = 1e9
-DEG = math.pi / 180.0
 
 
 class GyrolessError(ValueError):
@@ -275,7 +272,7 @@ def prepare_gyroless_inputs(
                          "ignored")
     sun_ok = np.all(np.isfinite(s_B), axis=1)
     sigma_b = np.sqrt(s.magnetometer_noise_nT**2 + s.field_model_error_nT**2) / B_norm
-    sigma_s = np.full(t.size, max(s.sun_sensor_noise_deg, 1e-3) * DEG)
+    sigma_s = np.full(t.size, max(s.sun_sensor_noise_deg, 1e-3) * RAD_PER_DEG)
 
     # known control torque
     torque = np.zeros((t.size, 3))
@@ -299,7 +296,7 @@ def prepare_gyroless_inputs(
     sl = slice(k0, None)
     b_O_unit = B_O / np.linalg.norm(B_O, axis=1, keepdims=True)
     if s.initial_angles_deg is not None:
-        q0 = q_OB_from_roll_pitch_yaw_004(*(np.asarray(s.initial_angles_deg, dtype=float) * DEG))
+        q0 = q_OB_from_roll_pitch_yaw_004(*(np.asarray(s.initial_angles_deg, dtype=float) * RAD_PER_DEG))
     else:
         q0 = triad_q_OB(b_O_unit[k0], s_O[k0], b_B[k0], s_B[k0])
     c2 = rotations.quat_rotate(rotations.quat_conjugate(q0), np.array([0.0, 1.0, 0.0]))
@@ -346,7 +343,7 @@ def estimate_gyroless_attitude(
     t, w0, dcm_IO, in_shadow = prep.time_tai_ns, prep.w0_rad_s, prep.dcm_IO, prep.sun_in_shadow
     try:
         run = run_filter(s.filter, inputs, J, q0, prep.omega0_BI_B,
-                         attitude_sigma_rad=s.initial_attitude_sigma_deg * DEG,
+                         attitude_sigma_rad=s.initial_attitude_sigma_deg * RAD_PER_DEG,
                          rate_sigma_rad_s=s.initial_rate_sigma_rad_s,
                          disturbance_sigma_N_m=s.initial_disturbance_sigma_N_m, tuning=s.tuning)
     except ValueError as exc:

@@ -28,8 +28,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from processing.orbits.gnss_systems import DEFAULT_MAX_AGE_S, KEPLER_SYSTEMS, STATE_SYSTEMS
+from processing.units import NS_PER_S
 
-NS_PER_S = 1_000_000_000
 GM_GPS_M3_S2 = 3.986005e14
 """WGS 84 value of GM used by the GPS user algorithm (IS-GPS-200, 20.3.3.4.3)."""
 GM_GAL_M3_S2 = 3.986004418e14

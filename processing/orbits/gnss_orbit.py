@@ -42,10 +42,9 @@ from numpy.polynomial import chebyshev as cheb
 from numpy.typing import ArrayLike, NDArray
 
 from processing.frames.earth_orientation import EarthOrientation, itrs_to_gcrs_state
-from processing.orbits.two_body import MU_EARTH_M3_S2
 from processing.signal.sine_series import SineSeriesFit, fit_sine_series, select_harmonics
+from processing.units import MU_EARTH_M3_S2, NS_PER_S
 
-NS_PER_S = 1_000_000_000
 DEGREE_MIN = 3
 DEGREE_MAX = 30
 """Largest Chebyshev degree tried (20 min of LEO arc needs ~10; a 95 min orbit ~25)."""

@@ -1,4 +1,4 @@
-"""Small two-body orbit tools: circular orbits, J2 nodal rate, sun-synchronous inclination, energy.
+"""Small two-body orbit tools: circular orbits, J2_EARTH nodal rate, sun-synchronous inclination, energy.
 
 Used by the scenario simulators and by screening (specific energy, 002 eq. 15). Pure numpy,
 vectorised over samples; SI units (m, s, rad).
@@ -8,9 +8,9 @@ Constants
 - ``MU_EARTH_M3_S2 = 3.986004418e14``: geocentric gravitational constant GM of WGS 84 / EGM2008
   (NGA.STND.0036, WGS 84, 2014; identical to the IERS Conventions 2010 value).
 - ``R_EARTH_M = 6378137.0``: WGS 84 / GRS 80 equatorial radius.
-- ``J2 = 1.08262668e-3``: unnormalised second zonal harmonic of EGM96 (J2 = -sqrt(5) C20bar with
+- ``J2_EARTH = 1.08262668e-3``: unnormalised second zonal harmonic of EGM96 (J2_EARTH = -sqrt(5) C20bar with
   the normalised C20bar = -0.484165371736e-3), the value tabulated by Vallado. (WGS 84's
-  J2 = 1.0826298e-3; the 3e-6 relative difference moves the sun-synchronous inclination by ~3e-5 deg.)
+  J2_EARTH = 1.0826298e-3; the 3e-6 relative difference moves the sun-synchronous inclination by ~3e-5 deg.)
 - ``SUN_MEAN_MOTION_RAD_S``: 2 pi per tropical year of 365.2421897 days, the rate at which the
   mean Sun moves in right ascension; a sun-synchronous node precesses at this rate.
 """
@@ -20,12 +20,9 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-MU_EARTH_M3_S2 = 3.986004418e14
-R_EARTH_M = 6378137.0
-J2 = 1.08262668e-3
-DAY_S = 86400.0
-TROPICAL_YEAR_DAYS = 365.2421897
-SUN_MEAN_MOTION_RAD_S = 2.0 * np.pi / (TROPICAL_YEAR_DAYS * DAY_S)
+from processing.units import J2_EARTH, MU_EARTH_M3_S2, R_EARTH_M, S_PER_DAY, TROPICAL_YEAR_DAYS
+
+SUN_MEAN_MOTION_RAD_S = 2.0 * np.pi / (TROPICAL_YEAR_DAYS * S_PER_DAY)
 
 
 class OrbitInputError(ValueError):
@@ -65,7 +62,7 @@ def circular_orbit_state(
     r_I, v_I : (..., 3) [m], [m/s]. With u = u0 + n t and RAAN = raan + raan_rate t,
         r_I = a (cos RAAN cos u - sin RAAN cos i sin u, sin RAAN cos u + cos RAAN cos i sin u, sin i sin u)
     and v_I = dr_I/dt exactly, i.e. v_I = n dr/du + raan_rate z x r_I (the second term is absent for
-    a two-body orbit). With a non-zero node rate the state is a kinematic model of a J2-precessing
+    a two-body orbit). With a non-zero node rate the state is a kinematic model of a J2_EARTH-precessing
     circular orbit, not a solution of the two-body problem: its specific energy then varies by
     about (raan_rate a sin i)^2 / 2 (~1e-3 J/kg at 830 km, 4e-11 relative).
     """
@@ -94,11 +91,11 @@ def j2_raan_rate_rad_s(
     *,
     mu_m3_s2: float = MU_EARTH_M3_S2,
     r_earth_m: float = R_EARTH_M,
-    j2: float = J2,
+    j2: float = J2_EARTH,
 ) -> NDArray:
-    """Secular J2 rate of the right ascension of the ascending node [rad/s].
+    """Secular J2_EARTH rate of the right ascension of the ascending node [rad/s].
 
-    dRAAN/dt = -3/2 n J2 (R / p)^2 cos i, with p = a (1 - e^2) (first-order secular J2 theory,
+    dRAAN/dt = -3/2 n J2_EARTH (R / p)^2 cos i, with p = a (1 - e^2) (first-order secular J2_EARTH theory,
     e.g. Vallado, Fundamentals of Astrodynamics and Applications, chapter 9).
     """
     a = np.asarray(a_m, dtype=float)
@@ -115,12 +112,12 @@ def sun_synchronous_inclination_rad(
     *,
     mu_m3_s2: float = MU_EARTH_M3_S2,
     r_earth_m: float = R_EARTH_M,
-    j2: float = J2,
+    j2: float = J2_EARTH,
 ) -> NDArray:
-    """Inclination [rad] whose J2 secular node rate equals the Sun's mean motion.
+    """Inclination [rad] whose J2_EARTH secular node rate equals the Sun's mean motion.
 
     Solves j2_raan_rate_rad_s(a, i, e) = SUN_MEAN_MOTION_RAD_S (2 pi / 365.2421897 d):
-    cos i = -SUN_MEAN_MOTION_RAD_S / (3/2 n J2 (R / p)^2). Raises OrbitInputError where no
+    cos i = -SUN_MEAN_MOTION_RAD_S / (3/2 n J2_EARTH (R / p)^2). Raises OrbitInputError where no
     sun-synchronous orbit exists (|cos i| > 1, i.e. p above about 12 350 km).
     """
     a = np.asarray(a_m, dtype=float)

@@ -9,7 +9,7 @@ Criteria (``name``: what is tested; where the tolerance comes from):
 GNSS (ITRF position/velocity):
 - ``energy`` (002, eq. 15): |h - h_ref| <= k1 dh with h = v^2 - 2 mu / r of the inertial velocity
   (v_I = v_E + w x r_E) and the paper's dh = 2 (v dv + mu / r^2 dr), dr and dv the receiver's
-  errors. With ``energy_model="j2"`` the J2 potential is included, h = v^2 - 2 mu/r (1 - J2 (R/r)^2
+  errors. With ``energy_model="j2"`` the J2_EARTH potential is included, h = v^2 - 2 mu/r (1 - J2_EARTH (R/r)^2
   P2(sin lat)), which is constant for an axisymmetric field, so a real orbit is not flagged by the
   +-1e5 m^2/s^2 twice-per-orbit oscillation of the two-body h. h_ref comes from an uploaded reference
   orbit when given (the paper's "external trajectory measurements of the control centre"), else
@@ -17,7 +17,7 @@ GNSS (ITRF position/velocity):
   drag: ~300 m^2/s^2 for "j2") is added to dh.
 - ``orbit_plane``: the angle between the orbit normal r x v_I and its running median over
   +-``plane_window_s``; catches cross-track velocity and position errors, which leave eq. 15
-  unchanged. Tolerance k (dv / v + dr / r) plus the J2 wobble of the normal over half the window.
+  unchanged. Tolerance k (dv / v + dr / r) plus the J2_EARTH wobble of the normal over half the window.
 - ``kinematic``: consecutive positions against the trapezoid integral of the velocities,
   |r_k+1 - r_k - (v_k + v_k+1) dt / 2| <= k sqrt(2 dr^2 + dt^2 dv^2 / 2) + dt^3 |r'''| / 12 (the
   trapezoid's truncation error, with the jerk bound of :func:`jerk_bound_m_s3`); a sample is flagged
@@ -60,11 +60,9 @@ from numpy.typing import ArrayLike, NDArray
 
 from processing.attitude import rotations
 from processing.environment import igrf_field_E_nT, sun_position_I_m, sunlit_fraction
-from processing.frames.earth_orientation import OMEGA_EARTH_RAD_S
 from processing.frames.earth_rotation_interp import gcrs_to_itrs_mat_interp
-from processing.orbits.two_body import J2, MU_EARTH_M3_S2, R_EARTH_M
+from processing.units import J2_EARTH, MU_EARTH_M3_S2, NS_PER_S, OMEGA_EARTH_RAD_S, R_EARTH_M
 
-NS_PER_S = 1_000_000_000
 Columns = Mapping[str, NDArray[Any]]
 VECTOR_COLUMNS = {
     "gnss": ("x", "y", "z", "vx", "vy", "vz"),
@@ -110,7 +108,7 @@ class ScreeningParams:
     k_energy: float = 4.0
     energy_model: Literal["j2", "two_body"] = "j2"
     energy_model_error_m2_s2: float | None = None
-    """Model error of h added to dh; None: 300 m^2/s^2 for "j2", 2.5e5 for "two_body" (J2 oscillation)."""
+    """Model error of h added to dh; None: 300 m^2/s^2 for "j2", 2.5e5 for "two_body" (J2_EARTH oscillation)."""
     k_plane: float = 5.0
     plane_window_s: float = 10.0
     """Half-width of the orbit-normal running median (at least 2 samples)."""
@@ -340,7 +338,7 @@ def _reference_h(reference: Columns, frame: str, t_ns: NDArray[np.int64], model:
     v = np.stack([np.asarray(reference[c], dtype=np.float64) for c in ("vx", "vy", "vz")], axis=1)
     order = np.argsort(tr)
     tr, r, v = tr[order], r[order], v[order]
-    if frame.upper() not in ("ITRF", "ITRS", "E"):  # inertial reference: to ITRF for the J2 latitude
+    if frame.upper() not in ("ITRF", "ITRS", "E"):  # inertial reference: to ITRF for the J2_EARTH latitude
         m = gcrs_to_itrs_mat_interp(tr)
         r_e = np.einsum("nij,nj->ni", m, r)
         v_e = np.einsum("nij,nj->ni", m, v) - np.cross([0.0, 0.0, OMEGA_EARTH_RAD_S], r_e)
@@ -410,9 +408,9 @@ def _screen_gnss(col: _Collector, cols: Columns, p: ScreeningParams, reference: 
         med = med / np.linalg.norm(med, axis=1, keepdims=True)
         ang = np.arccos(np.clip(np.sum(nrm * med, axis=1), -1.0, 1.0))
         rn = np.linalg.norm(r, axis=1)
-        # noise, plus the J2 wobble of the normal (rate < 3 J2 (R/r)^2 n) over half the window, which a
+        # noise, plus the J2_EARTH wobble of the normal (rate < 3 J2_EARTH (R/r)^2 n) over half the window, which a
         # one-sided window (next to rejected samples or at the ends) turns into a bias
-        wobble = 3.0 * J2 * (R_EARTH_M / rn) ** 2 * np.sqrt(MU_EARTH_M3_S2 / rn**3) * 0.5 * hw * period_s
+        wobble = 3.0 * J2_EARTH * (R_EARTH_M / rn) ** 2 * np.sqrt(MU_EARTH_M3_S2 / rn**3) * 0.5 * hw * period_s
         tol_plane = p.k_plane * (dv / np.linalg.norm(vi, axis=1) + dr / rn) + wobble
         applied = np.isfinite(ang)
         col.add("orbit_plane", rows, ang > tol_plane, ang, float(np.nanmedian(tol_plane)), "rad", "generic", applied)

@@ -9,10 +9,8 @@ import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 from numpy.typing import ArrayLike, NDArray
 
-from processing.frames.earth_orientation import OMEGA_EARTH_RAD_S
-from processing.orbits.two_body import J2, MU_EARTH_M3_S2, R_EARTH_M
+from processing.units import J2_EARTH, MU_EARTH_M3_S2, NS_PER_S, OMEGA_EARTH_RAD_S, R_EARTH_M
 
-NS_PER_S = 1_000_000_000
 
 class ScreeningError(ValueError):
     """Inputs the screening cannot use (missing columns, inconsistent lengths)."""
@@ -175,8 +173,8 @@ def inertial_velocity_E(r_E: ArrayLike, v_E: ArrayLike) -> NDArray[np.float64]:
 def energy_h(r_E: ArrayLike, v_E: ArrayLike, model: str = "j2") -> NDArray[np.float64]:
     """The energy constant h of 002 eq. 15, h = v^2 - 2 U (m^2/s^2), with the inertial speed.
 
-    model "two_body": U = mu / r (the paper); "j2": U = mu / r (1 - J2 (R/r)^2 (3 sin^2 lat - 1) / 2),
-    the potential including J2, for which h is conserved (axisymmetric field).
+    model "two_body": U = mu / r (the paper); "j2": U = mu / r (1 - J2_EARTH (R/r)^2 (3 sin^2 lat - 1) / 2),
+    the potential including J2_EARTH, for which h is conserved (axisymmetric field).
     r_E, v_E: (..., 3) ITRF m, m/s (velocity relative to the Earth).
     """
     r = np.asarray(r_E, dtype=np.float64)
@@ -185,7 +183,7 @@ def energy_h(r_E: ArrayLike, v_E: ArrayLike, model: str = "j2") -> NDArray[np.fl
     u = MU_EARTH_M3_S2 / rn
     if model == "j2":
         s = r[..., 2] / rn
-        u = u * (1.0 - J2 * (R_EARTH_M / rn) ** 2 * 0.5 * (3.0 * s * s - 1.0))
+        u = u * (1.0 - J2_EARTH * (R_EARTH_M / rn) ** 2 * 0.5 * (3.0 * s * s - 1.0))
     elif model != "two_body":
         raise ScreeningError(f"energy model must be 'j2' or 'two_body', got {model!r}")
     return np.sum(v * v, axis=-1) - 2.0 * u

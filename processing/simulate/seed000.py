@@ -50,22 +50,14 @@ from numpy.typing import ArrayLike, NDArray
 
 from processing.attitude import rotations
 from processing.frames.orbital import q_IO_003
-from processing.orbits.two_body import (
-    R_EARTH_M,
-    circular_orbit_state,
-    mean_motion_rad_s,
-    sun_synchronous_inclination_rad,
-)
-
-ARCSEC_RAD = np.pi / (180.0 * 3600.0)
-DEG_RAD = np.pi / 180.0
-NS_PER_S = 1_000_000_000
+from processing.orbits.two_body import circular_orbit_state, mean_motion_rad_s, sun_synchronous_inclination_rad
+from processing.units import NS_PER_S, R_EARTH_M, RAD_PER_ARCSEC, RAD_PER_DEG
 
 ALTITUDE_000_M = 720e3
-DRIFT_000_RAD_S = (1.0 * ARCSEC_RAD, -0.8 * ARCSEC_RAD, 0.3 * ARCSEC_RAD)
+DRIFT_000_RAD_S = (1.0 * RAD_PER_ARCSEC, -0.8 * RAD_PER_ARCSEC, 0.3 * RAD_PER_ARCSEC)
 """Test drift vector b^g of 000 ({1, -0.8, 0.3} arcsec/s)."""
-ST_NOISE_000_RAD = 0.3 * ARCSEC_RAD
-GYRO_NOISE_000_RAD = 0.001 * ARCSEC_RAD
+ST_NOISE_000_RAD = 0.3 * RAD_PER_ARCSEC
+GYRO_NOISE_000_RAD = 0.001 * RAD_PER_ARCSEC
 """Std of the increment noise delta_s per axis (000: 0.001 arcsec at 128 Hz)."""
 GYRO_PERIOD_NS = 7_812_500
 """T_q = 1/128 s exactly."""
@@ -74,7 +66,7 @@ GYRO_SENSOR = "gyro"
 Q_OB_NADIR = np.array([0.0, 1.0, 0.0, 0.0])
 """Orbital orientation of 000's imaging satellite: 180 deg about O axis 1, so body x = O axis 1 (along
 track), body z = -O axis 3 (nadir), body y = -O axis 2."""
-Q_BS_000 = rotations.quat_from_axis_angle([1.0, 0.0, 0.0], -150.0 * DEG_RAD)
+Q_BS_000 = rotations.quat_from_axis_angle([1.0, 0.0, 0.0], -150.0 * RAD_PER_DEG)
 """Star-tracker mounting: boresight S z = (0, 1/2, -sqrt(3)/2) in B, 30 deg from anti-nadir (-z)."""
 _GL_NODES = np.array([-1.0, 1.0]) / np.sqrt(3.0)
 _GL_WEIGHTS = np.array([1.0, 1.0])
@@ -320,13 +312,13 @@ def simulate_seed000(
     seed: int = 0,
     st_period_s: float = 1.0,
     altitude_m: float = ALTITUDE_000_M,
-    raan_rad: float = 100.0 * DEG_RAD,
+    raan_rad: float = 100.0 * RAD_PER_DEG,
     u0_rad: float = 0.0,
     initial_hold_s: float = 120.0,
     slew_duration_s: tuple[float, float] = (40.0, 60.0),
-    slew_peak_rate_rad_s: tuple[float, float] = (2.0 * DEG_RAD, 5.0 * DEG_RAD),
+    slew_peak_rate_rad_s: tuple[float, float] = (2.0 * RAD_PER_DEG, 5.0 * RAD_PER_DEG),
     scan_duration_s: tuple[float, float] = (60.0, 120.0),
-    scan_peak_rate_rad_s: tuple[float, float] = (0.3 * DEG_RAD, 0.9 * DEG_RAD),
+    scan_peak_rate_rad_s: tuple[float, float] = (0.3 * RAD_PER_DEG, 0.9 * RAD_PER_DEG),
     hold_duration_s: tuple[float, float] = (0.0, 10.0),
     misalignment_rad: tuple[float, float, float] | None = None,
     scale_factor_error: float | None = None,
@@ -371,7 +363,7 @@ def simulate_seed000(
     rng_plan, rng_st, rng_gyro, rng_cal = (Generator(PCG64(s)) for s in SeedSequence(seed).spawn(4))
     if misalignment_rad is None:
         signs = rng_cal.choice([-1.0, 1.0], size=3)
-        misalignment_rad = tuple((signs * rng_cal.uniform(20.0, 60.0, size=3) * ARCSEC_RAD).tolist())
+        misalignment_rad = tuple((signs * rng_cal.uniform(20.0, 60.0, size=3) * RAD_PER_ARCSEC).tolist())
     if scale_factor_error is None:
         scale_factor_error = float(rng_cal.choice([-1.0, 1.0]) * rng_cal.uniform(0.001, 0.005))
     parameters.update(misalignment_rad=misalignment_rad, scale_factor_error=scale_factor_error)

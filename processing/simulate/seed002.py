@@ -10,7 +10,7 @@ Model:
 
 - orbit: sun-synchronous, initially circular at ``altitude_m`` (550 km), node placed at local time
   ``ltan_h`` (10:30, so a third of the orbit is in the Earth's shadow), integrated in the GCRS with
-  the central field and J2 about the true pole (DOP853, rtol 1e-11), so the two-body energy of the
+  the central field and J2_EARTH about the true pole (DOP853, rtol 1e-11), so the two-body energy of the
   truth oscillates as a real orbit's does; ITRS by processing.frames.earth_rotation_interp (IAU 2006/2000A,
   zero EOP);
 - attitude relative to the orbital frame O of 002 (Z2 radial, Y2 orbital angular momentum, X2
@@ -45,16 +45,15 @@ from scipy.integrate import solve_ivp
 
 from processing.attitude import rotations
 from processing.environment import igrf_field_E_nT, sun_position_I_m, sunlit_fraction
-from processing.frames.earth_orientation import OMEGA_EARTH_RAD_S, gcrs_to_itrs_mat
+from processing.frames.earth_orientation import gcrs_to_itrs_mat
 from processing.frames.earth_rotation_interp import gcrs_to_itrs_mat_interp
 from processing.frames.orbital import dcm_IO_003
 from processing.orbits.gnss_ephemeris import satellite_positions_E
-from processing.orbits.two_body import J2, MU_EARTH_M3_S2, R_EARTH_M, sun_synchronous_inclination_rad
+from processing.orbits.two_body import sun_synchronous_inclination_rad
 from processing.time.timescales import iso_to_tai_ns
+from processing.units import J2_EARTH, MU_EARTH_M3_S2, NS_PER_S, OMEGA_EARTH_RAD_S, R_EARTH_M, RAD_PER_DEG
 from processing.vector_attitude.antenna_axis import dcm_EO_002, earth_occulted, line_of_sight_O
 
-DEG = np.pi / 180.0
-NS_PER_S = 1_000_000_000
 GRAZING_ALTITUDE_M = 50e3
 FAULT_SPACING = 25
 DEFAULT_START_UTC = "2015-10-07T06:00:00"
@@ -144,8 +143,8 @@ def _fault_rows(rng: Generator, n: int, fraction: float, spacing: int = FAULT_SP
 
 def _propagate_j2(r0: NDArray[np.float64], v0: NDArray[np.float64], t_s: NDArray[np.float64],
                   pole_I: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Central field + J2 about the unit pole (GCRS), DOP853; states at t_s (s from the start)."""
-    k = 1.5 * J2 * MU_EARTH_M3_S2 * R_EARTH_M**2
+    """Central field + J2_EARTH about the unit pole (GCRS), DOP853; states at t_s (s from the start)."""
+    k = 1.5 * J2_EARTH * MU_EARTH_M3_S2 * R_EARTH_M**2
 
     def rhs(_t: float, y: NDArray[np.float64]) -> NDArray[np.float64]:
         r = y[:3]
@@ -173,11 +172,11 @@ def simulate_seed002(
     visibility_period_s: float = 1.0,
     altitude_m: float = 550e3,
     ltan_h: float = 10.5,
-    u0_rad: float = 30.0 * DEG,
-    pitch_mean_rad: float = -40.0 * DEG,
-    pitch_amplitude_rad: float = 10.0 * DEG,
-    yaw_amplitude_rad: float = 20.0 * DEG,
-    roll_rate_rad_s: float = 0.3 * DEG,
+    u0_rad: float = 30.0 * RAD_PER_DEG,
+    pitch_mean_rad: float = -40.0 * RAD_PER_DEG,
+    pitch_amplitude_rad: float = 10.0 * RAD_PER_DEG,
+    yaw_amplitude_rad: float = 20.0 * RAD_PER_DEG,
+    roll_rate_rad_s: float = 0.3 * RAD_PER_DEG,
     magnetometer_noise_nT: float = 100.0,
     q_BM: tuple[float, float, float, float] = Q_BM_002,
     max_current_a: float = 1.2,
@@ -185,7 +184,7 @@ def simulate_seed002(
     gnss_position_noise_m: float = 5.0,
     gnss_velocity_noise_m_s: float = 0.05,
     antenna_axis_B: tuple[float, float, float] = (1.0, 0.0, 0.0),
-    cone_half_angle_rad: float = 80.0 * DEG,
+    cone_half_angle_rad: float = 80.0 * RAD_PER_DEG,
     visibility_miss_probability: float = 0.01,
     gnss_fault_fraction: float = 0.005,
     magnetometer_fault_fraction: float = 0.005,
@@ -215,11 +214,11 @@ def simulate_seed002(
     t_s = np.arange(n) * period_s
     time_ns = start + np.round(t_s * NS_PER_S).astype(np.int64)
 
-    # Orbit: sun-synchronous, node at local time ltan_h, J2 about the true pole.
+    # Orbit: sun-synchronous, node at local time ltan_h, J2_EARTH about the true pole.
     a = R_EARTH_M + altitude_m
     inc = float(sun_synchronous_inclination_rad(a))
     sun0 = sun_position_I_m(np.array([start]))[0]
-    raan = float(np.arctan2(sun0[1], sun0[0])) + (ltan_h - 12.0) * 15.0 * DEG
+    raan = float(np.arctan2(sun0[1], sun0[0])) + (ltan_h - 12.0) * 15.0 * RAD_PER_DEG
     node = np.array([np.cos(raan), np.sin(raan), 0.0])
     normal = np.array([np.sin(raan) * np.sin(inc), -np.cos(raan) * np.sin(inc), np.cos(inc)])
     along = np.cross(normal, node)

@@ -41,17 +41,14 @@ from numpy.typing import NDArray
 
 from processing.attitude import rotations
 from processing.frames.earth_orientation import EarthOrientation, gcrs_to_itrs_state
-from processing.orbits.two_body import R_EARTH_M, mean_motion_rad_s, sun_synchronous_inclination_rad
+from processing.orbits.two_body import mean_motion_rad_s, sun_synchronous_inclination_rad
 from processing.simulate.orbital_attitude_model import OrbitalAttitudeModel, SinusoidSeries
+from processing.units import NS_PER_S, R_EARTH_M, RAD_PER_ARCSEC, RAD_PER_DEG
 
-ARCSEC_RAD = np.pi / (180.0 * 3600.0)
-DEG_RAD = np.pi / 180.0
-NS_PER_S = 1_000_000_000
-
-ALPHA_003_RAD = 15.0 * DEG_RAD
+ALPHA_003_RAD = 15.0 * RAD_PER_DEG
 """Mounting angle alpha of 003 §1.1."""
-ST_NOISE_STD_003_RAD = (2.5 * ARCSEC_RAD, 5.0 * ARCSEC_RAD, 15.0 * ARCSEC_RAD)
-GYRO_BIAS_003_RAD_S = (-1.84 * ARCSEC_RAD, 4.52 * ARCSEC_RAD, 0.55 * ARCSEC_RAD)
+ST_NOISE_STD_003_RAD = (2.5 * RAD_PER_ARCSEC, 5.0 * RAD_PER_ARCSEC, 15.0 * RAD_PER_ARCSEC)
+GYRO_BIAS_003_RAD_S = (-1.84 * RAD_PER_ARCSEC, 4.52 * RAD_PER_ARCSEC, 0.55 * RAD_PER_ARCSEC)
 ATTITUDE_PERIODS_S = (900.0, 420.0, 230.0)
 """Nominal periods of the slow attitude sinusoids; each is scaled by a factor in [0.8, 1.2] from the seed."""
 ATTITUDE_WEIGHTS = (0.5, 0.3, 0.2)
@@ -207,22 +204,22 @@ def simulate_seed003(
     n_st_gaps: int = 3,
     st_time_offset_s: float = 0.037,
     altitude_m: float = 830e3,
-    raan_rad: float = 100.0 * DEG_RAD,
-    u0_rad: float = 20.0 * DEG_RAD,
+    raan_rad: float = 100.0 * RAD_PER_DEG,
+    u0_rad: float = 20.0 * RAD_PER_DEG,
     pitch_mean_rad: float = 0.0,
-    pitch_amplitude_rad: float = 0.3 * DEG_RAD,
-    yaw_mean_rad: float = 1.2 * DEG_RAD,
-    yaw_amplitude_rad: float = 0.25 * DEG_RAD,
+    pitch_amplitude_rad: float = 0.3 * RAD_PER_DEG,
+    yaw_mean_rad: float = 1.2 * RAD_PER_DEG,
+    yaw_amplitude_rad: float = 0.25 * RAD_PER_DEG,
     roll_mean_rad: float = 0.0,
-    roll_amplitude_rad: float = 0.3 * DEG_RAD,
+    roll_amplitude_rad: float = 0.3 * RAD_PER_DEG,
     vibration_hz: float = 0.4,
-    vibration_amplitude_rad: tuple[float, float, float] = (3.0 * ARCSEC_RAD,) * 3,
+    vibration_amplitude_rad: tuple[float, float, float] = (3.0 * RAD_PER_ARCSEC,) * 3,
     alpha_rad: float = ALPHA_003_RAD,
     st_noise_std_rad: tuple[float, float, float] = ST_NOISE_STD_003_RAD,
     q_BG: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0),
     gyro_bias_rad_s: tuple[float, float, float] = GYRO_BIAS_003_RAD_S,
     gyro_bias_drift_rad_s2: tuple[float, float, float] = (0.0, 0.0, 0.0),
-    gyro_noise_std_rad_s: float = 1.5 * ARCSEC_RAD,
+    gyro_noise_std_rad_s: float = 1.5 * RAD_PER_ARCSEC,
     gnss_position_noise_std_m: float = 1.0,
     gnss_velocity_noise_std_m_s: float = 1e-3,
 ) -> Scenario003:

@@ -53,7 +53,7 @@ from processing.attitude.rigid_body import (
 from processing.environment.eclipse import sunlit_fraction
 from processing.environment.igrf import igrf_field_E_nT
 from processing.environment.sun import sun_direction_I, sun_position_I_m
-from processing.frames.earth_orientation import OMEGA_EARTH_RAD_S, EarthOrientation
+from processing.frames.earth_orientation import EarthOrientation
 from processing.frames.earth_rotation_interp import gcrs_to_itrs_mat_interp
 from processing.frames.orbital import dcm_IO_lvlh_004
 from processing.gyroless.ekf import FILTERS, FilterTuning, initial_covariance, triad_q_OB
@@ -65,12 +65,11 @@ from processing.gyroless.magnetic_control import (
     AveragedLQR,
     design_averaged_lqr,
 )
-from processing.orbits.two_body import R_EARTH_M, circular_orbit_state, mean_motion_rad_s
+from processing.orbits.two_body import circular_orbit_state, mean_motion_rad_s
+from processing.units import NS_PER_S, OMEGA_EARTH_RAD_S, R_EARTH_M, RAD_PER_DEG
 
 __all__ = ["Scenario004", "Seed004ParameterError", "Truth004", "orbit_period_s", "simulate_seed004"]
 
-DEG = math.pi / 180.0
-NS_PER_S = 1_000_000_000
 Controller = Literal["energy", "lqr", "none"]
 Estimator = Literal["ekf", "mekf", "truth"]
 
@@ -221,7 +220,7 @@ def simulate_seed004(
     # orbit and environment on the step grid (vectorised)
     a_m = R_EARTH_M + altitude_m
     w0 = float(mean_motion_rad_s(a_m))
-    inc = inclination_deg * DEG
+    inc = inclination_deg * RAD_PER_DEG
     s_I0 = sun_direction_I(start)
     raan = float(math.atan2(-s_I0[0], s_I0[1])) % (2 * math.pi) if raan_rad is None else float(raan_rad)
     r_I, v_I = circular_orbit_state(t_s, a_m, inc, raan, u0_rad)
@@ -239,7 +238,7 @@ def simulate_seed004(
         s_O = np.einsum("kji,kj->ki", dcm_IO, sun_direction_I(time_ns))
         sunlit = sunlit_fraction(r_I, sun_position_I_m(time_ns))
     u = (u0_rad + w0 * t_s) % (2 * math.pi)
-    du = (u - sun_outage_center_u_deg * DEG + math.pi) % (2 * math.pi) - math.pi
+    du = (u - sun_outage_center_u_deg * RAD_PER_DEG + math.pi) % (2 * math.pi) - math.pi
     outage = np.abs(du) < 0.5 * w0 * sun_outage_s
     sun_visible = (sunlit >= 1.0) & ~outage
 
@@ -249,7 +248,7 @@ def simulate_seed004(
     dcm_MB = rotations.quat_to_dcm(rotations.quat_conjugate(q_BM_a))
     dcm_SB = rotations.quat_to_dcm(rotations.quat_conjugate(q_BS_a))
     mag_noise = rng_mag.standard_normal((K, 3)) * magnetometer_noise_nT
-    sun_rot_noise = rng_sun.standard_normal((K, 3)) * (sun_sensor_noise_deg * DEG)
+    sun_rot_noise = rng_sun.standard_normal((K, 3)) * (sun_sensor_noise_deg * RAD_PER_DEG)
     B_O_meas = B_O + field_model_error * np.array([1.0, -1.0, 1.0]) * np.linalg.norm(B_O, axis=1, keepdims=True)
     amp = np.asarray(disturbance_N_m, dtype=float)
     _check(amp.shape == (3,), f"disturbance_N_m must have 3 components, got {disturbance_N_m!r}")
@@ -268,7 +267,7 @@ def simulate_seed004(
         lqr = design_averaged_lqr(J, w0, B_design * 1e-9, step_s=step_s, Q=lqr_q, R=lqr_r)
 
     # initial state
-    q = tuple(float(x) for x in q_OB_from_roll_pitch_yaw_004(*(np.asarray(initial_angles_deg) * DEG)))
+    q = tuple(float(x) for x in q_OB_from_roll_pitch_yaw_004(*(np.asarray(initial_angles_deg) * RAD_PER_DEG)))
     c2 = dcm_BO_columns(q)[1]  # type: ignore[arg-type]
     w = tuple(float(initial_omega_BO_rad_s[i]) - w0 * c2[i] for i in range(3))
 
@@ -276,7 +275,7 @@ def simulate_seed004(
     mu_hist, tau_hist = np.zeros((K, 3)), np.zeros((K, 3))
     q_est_hist, w_est_hist = np.empty((K, 4)), np.empty((K, 3))
     b_M_all, s_S_all = np.empty((K, 3)), np.full((K, 3), np.nan)
-    sigma_s = max(sun_sensor_noise_deg * DEG, 1e-4)
+    sigma_s = max(sun_sensor_noise_deg * RAD_PER_DEG, 1e-4)
     # per-step sensor noise, drawn up front (the noise does not depend on the controller)
     R_sun_noise = rotations.quat_to_dcm(rotations.rotvec_to_quat(sun_rot_noise))
     B_O_T, B_O_meas_l = (B_O * 1e-9).tolist(), B_O_meas.tolist()
@@ -322,7 +321,7 @@ def simulate_seed004(
                 q_init = (triad_q_OB(b_O_unit[k], s_O[k], b_B_unit, s_B) if s_B is not None
                           else np.array([1.0, 0.0, 0.0, 0.0]))
                 c2i = np.array(dcm_BO_columns(tuple(q_init))[1])  # type: ignore[arg-type]
-                P0 = initial_covariance(estimator, q_init, (10 if s_B is not None else 60) * DEG, 2e-3, 1e-5)
+                P0 = initial_covariance(estimator, q_init, (10 if s_B is not None else 60) * RAD_PER_DEG, 2e-3, 1e-5)
                 est = FILTERS[estimator](J, q_init, -w0 * c2i, P0, tuning)
             else:
                 est.predict(step_s, w0, n2, prev_torque_B)

@@ -78,6 +78,7 @@ from processing.signal.spectral import (
     separable_frequencies,
 )
 from processing.tasks import Progress
+from processing.units import NS_PER_S
 
 __all__ = [
     "GyroComparison",
@@ -94,7 +95,6 @@ __all__ = [
     "split_segments",
 ]
 
-NS_PER_S = 1_000_000_000
 MAD_TO_SIGMA = 1.482602218505602
 """1 / Phi^-1(3/4): MAD of a normal sample times this is its standard deviation."""
 MIN_SEGMENT_SAMPLES = 12

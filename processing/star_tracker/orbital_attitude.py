@@ -60,8 +60,8 @@ from processing.star_tracker.accuracy import (
     sensor_axis_residuals,
     split_segments,
 )
+from processing.units import NS_PER_S
 
-NS_PER_S = 1_000_000_000
 ORBITAL_FRAMES = ("orbital_003", "lvlh_004")
 MIN_SMOOTHING_SAMPLES = 12
 SEGMENT_MAX_S = 1200.0

@@ -32,10 +32,9 @@ import numpy as np
 import pandas as pd
 from numpy.typing import ArrayLike, NDArray
 
+from processing.units import NS_PER_DAY, NS_PER_S, S_PER_DAY
+
 SCALES = ("utc", "tai", "gps", "tt")
-NS_PER_S = 1_000_000_000
-DAY_S = 86_400
-NS_PER_DAY = DAY_S * NS_PER_S
 TT_MINUS_TAI_S = 32.184
 TT_MINUS_TAI_NS = 32_184_000_000
 TAI_MINUS_GPS_S = 19
@@ -346,7 +345,7 @@ def iso_to_tai_ns(values: ArrayLike, scale: str = "utc") -> NDArray[np.int64]:
     month_start = _days_from_civil(np.repeat(years, 12), np.tile(np.arange(1, 13), years.size), np.ones(1, int))
     days = month_start[(np.clip(y, YEAR_MIN, YEAR_MAX) - YEAR_MIN) * 12 + np.clip(mo, 1, 12) - 1] + d - 1
     sec_of_day = f["hour"] * 3600 + f["minute"] * 60 + np.minimum(f["second"], 59) - f["zone_s"]  # int32
-    at59_ns = f["at59_ns"] = (days * DAY_S + sec_of_day) * NS_PER_S + f["frac_ns"]
+    at59_ns = f["at59_ns"] = (days * S_PER_DAY + sec_of_day) * NS_PER_S + f["frac_ns"]
     good = ok & ~too_many & year_ok & fields_ok
     if scale == "utc":
         table = _LeapTable()
@@ -362,7 +361,7 @@ def iso_to_tai_ns(values: ArrayLike, scale: str = "utc") -> NDArray[np.int64]:
         codes = np.where(is60, _E_LEAP_DAY, 0).astype(np.int8)
         if scale == "utc":
             codes[is60 & leap_ok] = 0
-            codes[is60 & (at59_ns % NS_PER_DAY < (DAY_S - 1) * NS_PER_S)] = _E_LEAP_TIME
+            codes[is60 & (at59_ns % NS_PER_DAY < (S_PER_DAY - 1) * NS_PER_S)] = _E_LEAP_TIME
             codes[k < 0] = _E_PRE1972
         else:
             codes[is60] = _E_LEAP_SCALE
@@ -586,7 +585,7 @@ def tai_ns_to_jd(tai_ns: ArrayLike, scale: str) -> tuple[NDArray[np.float64], ND
         return _jd_from_ns(t + _READING_MINUS_TAI_NS[scale])
     table = _LeapTable()
     day, ns_of_day, k = _tai_to_utc_parts(t, table)
-    day_s = DAY_S + np.where((day + 1) * NS_PER_DAY == table.next_start_ns[k], table.step_ns[k], 0) // NS_PER_S
+    day_s = S_PER_DAY + np.where((day + 1) * NS_PER_DAY == table.next_start_ns[k], table.step_ns[k], 0) // NS_PER_S
     return UNIX_EPOCH_JD + day.astype(np.float64), ns_of_day / (day_s * NS_PER_S)
 
 
@@ -619,7 +618,7 @@ def tai_ns_from_jd(jd1: ArrayLike, jd2: ArrayLike, scale: str) -> NDArray[np.int
     shape = a.shape
     a, b = a.reshape(-1), b.reshape(-1)
     codes = np.zeros(a.size, dtype=np.int8)
-    codes[~(np.abs(a + b - UNIX_EPOCH_JD) <= _NUMBER_LIMIT_S / DAY_S)] = 2
+    codes[~(np.abs(a + b - UNIX_EPOCH_JD) <= _NUMBER_LIMIT_S / S_PER_DAY)] = 2
     codes[np.isnan(a) | np.isnan(b)] = 1
     a, b = np.where(codes == 0, a, UNIX_EPOCH_JD), np.where(codes == 0, b, 0.0)
     x1 = a - UNIX_EPOCH_JD

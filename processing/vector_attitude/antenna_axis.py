@@ -31,9 +31,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from processing.frames.earth_orientation import OMEGA_EARTH_RAD_S
 from processing.frames.orbital import dcm_IO_003
-from processing.orbits.two_body import R_EARTH_M
+from processing.units import OMEGA_EARTH_RAD_S, R_EARTH_M
 
 DEFAULT_CONE_HALF_ANGLE_RAD = np.deg2rad(80.0)
 """A hemispherical patch antenna with a 10 deg elevation mask."""

@@ -40,7 +40,6 @@ from numpy.typing import ArrayLike, NDArray
 
 from processing.attitude import rotations, wahba
 from processing.environment.dipole import dipole_field_O002_nT
-from processing.frames.earth_orientation import OMEGA_EARTH_RAD_S
 from processing.frames.earth_rotation_interp import gcrs_to_itrs_mat_interp
 from processing.orbits.gnss_ephemeris import satellite_positions_E
 from processing.screening.criteria import (
@@ -51,6 +50,7 @@ from processing.screening.criteria import (
     pivot,
     sun_from_currents,
 )
+from processing.units import NS_PER_S, OMEGA_EARTH_RAD_S
 from processing.vector_attitude.antenna_axis import (
     DEFAULT_CONE_HALF_ANGLE_RAD,
     DEFAULT_GRAZING_ALTITUDE_M,
@@ -62,7 +62,6 @@ from processing.vector_attitude.antenna_axis import (
 )
 from processing.vector_attitude.loosely_coupled import loosely_coupled
 
-NS_PER_S = 1_000_000_000
 VECTORS = ("antenna", "magnetometer", "sun")
 METHODS = ("auto", "q_method", "quest", "svd", "esoq2", "loosely_coupled")
 Method = Literal["auto", "q_method", "quest", "svd", "esoq2", "loosely_coupled"]

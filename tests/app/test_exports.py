@@ -13,8 +13,9 @@ from app.api.routes import exports
 from app.main import create_app
 from processing.formats.ccsds_odm import parse_oem
 from processing.frames.earth_orientation import gcrs_to_itrs_state
-from processing.orbits.two_body import R_EARTH_M, circular_orbit_state
+from processing.orbits.two_body import circular_orbit_state
 from processing.time import timescales
+from processing.units import R_EARTH_M
 from tests.app.helpers import make_spacecraft, upload
 from tests.conftest import ADMIN_TOKEN
 

@@ -10,8 +10,9 @@ from processing.attitude import rotations
 from processing.formats.ccsds_adm import aem_segment, write_aem
 from processing.formats.ccsds_odm import oem_segment, write_oem
 from processing.frames.earth_orientation import gcrs_to_inertial_mat, gcrs_to_itrs_state
-from processing.orbits.two_body import R_EARTH_M, circular_orbit_state
+from processing.orbits.two_body import circular_orbit_state
 from processing.time import timescales
+from processing.units import R_EARTH_M
 from tests.app.helpers import make_spacecraft, upload
 from tests.real_data import GRACEFO, REFERENCE
 

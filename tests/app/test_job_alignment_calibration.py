@@ -9,9 +9,10 @@ from pydantic import ValidationError
 
 from app.jobs.types.alignment_calibration import JOB, Params
 from processing.attitude import rotations
-from processing.simulate.seed000 import ARCSEC_RAD, simulate_seed000
+from processing.simulate.seed000 import simulate_seed000
 from processing.tasks import TaskError, TaskInputs, TaskResult, no_progress
 from processing.time.timescales import iso_to_tai_ns
+from processing.units import RAD_PER_ARCSEC
 
 START = int(iso_to_tai_ns("2024-03-01T12:00:00"))
 DURATION_S = 900.0
@@ -51,10 +52,10 @@ def test_summary_keys_units_and_json(result, scenario):
     assert isinstance(s["drift_convergence_s"], float) and isinstance(s["calibration_windows"], int)
     tr = scenario.truth
     # 15 minutes: the accuracy is ~2x that of an hour (the hour is tested in tests/processing)
-    np.testing.assert_allclose(s["misalignment_rad"], tr.misalignment_rad, atol=2.0 * ARCSEC_RAD)
-    np.testing.assert_allclose(np.array(s["misalignment_sigma_rad"]) / ARCSEC_RAD, 0.5, atol=0.4)
+    np.testing.assert_allclose(s["misalignment_rad"], tr.misalignment_rad, atol=2.0 * RAD_PER_ARCSEC)
+    np.testing.assert_allclose(np.array(s["misalignment_sigma_rad"]) / RAD_PER_ARCSEC, 0.5, atol=0.4)
     assert s["scale_factor_error"] == pytest.approx(tr.scale_factor_error, abs=1e-5)
-    np.testing.assert_allclose(s["drift_rad_s"], tr.drift_G_rad_s(DURATION_S), atol=0.01 * ARCSEC_RAD)
+    np.testing.assert_allclose(s["drift_rad_s"], tr.drift_G_rad_s(DURATION_S), atol=0.01 * RAD_PER_ARCSEC)
     assert s["drift_convergence_s"] <= 60.0
     # DESIGN.md: misalignment_rad is the rotation vector of q_GS (the gyro is nominally aligned here)
     q_GS = np.array(s["q_GS"])
@@ -112,9 +113,9 @@ def test_gyro_rates_are_integrated_to_increments(scenario):
     out = JOB.run(_inputs(streams, scenario.config), JOB.params(), no_progress)
     s = out.summary
     assert s["gyro_stream"] == "gyro" and any("trapezoidal" in n for n in out.notes)
-    np.testing.assert_allclose(s["misalignment_rad"], scenario.truth.misalignment_rad, atol=5.0 * ARCSEC_RAD)
+    np.testing.assert_allclose(s["misalignment_rad"], scenario.truth.misalignment_rad, atol=5.0 * RAD_PER_ARCSEC)
     assert s["scale_factor_error"] == pytest.approx(scenario.truth.scale_factor_error, abs=5e-5)
-    np.testing.assert_allclose(s["drift_rad_s"], scenario.truth.drift_G_rad_s(DURATION_S), atol=0.05 * ARCSEC_RAD)
+    np.testing.assert_allclose(s["drift_rad_s"], scenario.truth.drift_G_rad_s(DURATION_S), atol=0.05 * RAD_PER_ARCSEC)
 
 
 def test_input_errors(scenario):

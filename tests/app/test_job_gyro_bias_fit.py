@@ -13,8 +13,9 @@ from pydantic import ValidationError
 
 from app.jobs.types.gyro_bias_fit import JOB
 from processing.attitude import rotations as rot
-from processing.simulate.seed003 import ARCSEC_RAD, Scenario003, simulate_seed003
+from processing.simulate.seed003 import Scenario003, simulate_seed003
 from processing.tasks import TaskError, TaskInputs, TaskResult, no_progress
+from processing.units import RAD_PER_ARCSEC
 from tests.app.helpers import assert_json_plain
 
 T0_NS = 1_900_000_000 * 1_000_000_000
@@ -61,9 +62,9 @@ def test_summary_keys_types_and_truth(default_result: tuple[Scenario003, TaskRes
     assert np.all(np.abs(b - sc.truth.gyro_bias0_rad_s) <= 4 * sig)
     assert np.all(np.array(s["gyro_bias_sigma_paper_rad_s"]) < 0.2 * sig)  # the paper's figure is optimistic
     # the paper's Delta in the sensor frame is -(bias in S)
-    delta = -rot.quat_rotate(rot.quat_conjugate(sc.truth.q_BS), b) / ARCSEC_RAD
+    delta = -rot.quat_rotate(rot.quat_conjugate(sc.truth.q_BS), b) / RAD_PER_ARCSEC
     np.testing.assert_allclose(s["delta_sensor_arcsec_s"], delta, atol=1e-9)
-    np.testing.assert_allclose(s["delta_body_arcsec_s"], -b / ARCSEC_RAD, atol=1e-9)
+    np.testing.assert_allclose(s["delta_body_arcsec_s"], -b / RAD_PER_ARCSEC, atol=1e-9)
     assert s["initial_time"].endswith("Z") and s["initial_time_tai_ns"] == T0_NS
     q_IB0 = np.array(s["initial_q_IB"])
     # a small rotation theta has MRP theta / 4
@@ -97,7 +98,7 @@ def test_tables(default_result: tuple[Scenario003, TaskResult]) -> None:
     rates = result.tables["rates"]
     assert rates["time_tai_ns"].size == sc.streams["gyro"]["time_tai_ns"].size  # 12,001 < 20,000 rows
     # rates corrected by the estimated bias are close to the truth (noise 1.5"/s)
-    err = rates["w2_B_deg_s"] * 3600 - sc.truth.w_B_gyro[:, 1] / ARCSEC_RAD
+    err = rates["w2_B_deg_s"] * 3600 - sc.truth.w_B_gyro[:, 1] / RAD_PER_ARCSEC
     assert abs(np.mean(err)) < 0.1 and 1.3 < np.std(err) < 1.7
 
 
@@ -147,7 +148,7 @@ def test_two_star_trackers_jointly() -> None:
     sc = scenario(4)
     st = sc.streams["star_tracker"]
     q_BS2 = rot.quat_multiply(sc.truth.q_BS, rot.quat_from_axis_angle([1.0, 0.0, 0.0], -np.pi / 2))
-    noise = np.random.default_rng(0).normal(size=(st["time_tai_ns"].size, 3)) * [2.5, 5, 15] * ARCSEC_RAD
+    noise = np.random.default_rng(0).normal(size=(st["time_tai_ns"].size, 3)) * [2.5, 5, 15] * RAD_PER_ARCSEC
     q2 = rot.quat_canonical(rot.quat_multiply(rot.quat_multiply(sc.truth.q_IB_st, q_BS2), rot.rotvec_to_quat(noise)))
     both = {k: np.concatenate([st[k], st[k]]) for k in ("time_tai_ns", "q0", "q1", "q2", "q3")}
     for i in range(4):

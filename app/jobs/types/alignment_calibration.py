@@ -30,10 +30,8 @@ from processing.gyro_calibration.calibration import CalibrationSettings, GyroCal
 from processing.gyro_calibration.drift_observer import MODE_NAMES, stationary_noise
 from processing.signal.two_pass_filter import increments_from_rates
 from processing.tasks import Progress, TaskError, TaskInputs, TaskResult
+from processing.units import ARCSEC_PER_RAD, DEG_PER_RAD, NS_PER_S, RAD_PER_ARCSEC, RAD_PER_DEG
 
-NS_PER_S = 1_000_000_000
-ARCSEC_RAD = np.pi / 648000.0
-DEG_RAD = np.pi / 180.0
 RESIDUAL_TABLE_MAX_ROWS = 30_000
 """The rate-residual table keeps every k-th window sample so that it has at most this many rows."""
 
@@ -79,13 +77,14 @@ class Params(BaseModel):
 
     def settings(self) -> CalibrationSettings:
         return CalibrationSettings(
-            t_r_s=self.t_r_s, xi=self.xi, rate_threshold_rad_s=self.rate_threshold_deg_s * DEG_RAD,
+            t_r_s=self.t_r_s, xi=self.xi, rate_threshold_rad_s=self.rate_threshold_deg_s * RAD_PER_DEG,
             window_min=self.window_min_samples, window_max=self.window_max_samples,
             output_period_s=self.output_period_s, trend_window_s=self.trend_window_s,
             trend_degree=self.trend_degree, max_iterations=self.iterations,
             change_tolerance=self.change_tolerance_sigma, acquisition=self.acquisition,
-            min_spread=self.min_rate_spread, max_misalignment_sigma_rad=self.max_misalignment_sigma_arcsec * ARCSEC_RAD,
-            convergence_tolerance_rad_s=self.convergence_tolerance_arcsec_s * ARCSEC_RAD,
+            min_spread=self.min_rate_spread,
+            max_misalignment_sigma_rad=self.max_misalignment_sigma_arcsec * RAD_PER_ARCSEC,
+            convergence_tolerance_rad_s=self.convergence_tolerance_arcsec_s * RAD_PER_ARCSEC,
             lag_compensation=self.lag_compensation,
         )
 
@@ -246,9 +245,9 @@ def _result(cal: GyroCalibration, params: Params, notes: list[str], *, sensor: s
         "window_start_tai_ns": inputs.start_tai_ns,
         "window_end_tai_ns": inputs.end_tai_ns,
         "misalignment_rad": _floats(mis),
-        "misalignment_arcsec": _floats(mis / ARCSEC_RAD),
+        "misalignment_arcsec": _floats(mis / RAD_PER_ARCSEC),
         "misalignment_sigma_rad": _floats(sig),
-        "misalignment_sigma_arcsec": _floats(sig / ARCSEC_RAD),
+        "misalignment_sigma_arcsec": _floats(sig / RAD_PER_ARCSEC),
         "misalignment_quaternion": _floats(q_mis),
         "misalignment_observable": [bool(v) for v in observable],
         "q_GS": _floats(est.q_GS),
@@ -258,7 +257,7 @@ def _result(cal: GyroCalibration, params: Params, notes: list[str], *, sensor: s
         "scale_factor_error_sigma": float(est.scale_factor_sigma),
         "scale_factor_error_percent": float(100.0 * est.scale_factor_error),
         "drift_rad_s": _floats(cal.drift_rad_s),
-        "drift_arcsec_s": _floats(cal.drift_rad_s / ARCSEC_RAD),
+        "drift_arcsec_s": _floats(cal.drift_rad_s / RAD_PER_ARCSEC),
         "drift_frame": "gyro (w_meas = (1 + m) S^Delta w + b)",
         "drift_time_tai_ns": end_ns,
         "drift_noise_rad_s": _floats(cal.drift_noise_rad_s),
@@ -276,17 +275,18 @@ def _result(cal: GyroCalibration, params: Params, notes: list[str], *, sensor: s
         "iteration_history": [_history_entry(h) for h in cal.iterations],
         "observer": {
             "t_r_s": params.t_r_s, "xi": params.xi, "g1": obs.g1, "g2_per_s": obs.g2,
-            "stationary_attitude_sigma_arcsec": att_sd / ARCSEC_RAD,
-            "stationary_drift_sigma_arcsec_s": drift_sd / ARCSEC_RAD,
+            "stationary_attitude_sigma_arcsec": att_sd / RAD_PER_ARCSEC,
+            "stationary_drift_sigma_arcsec_s": drift_sd / RAD_PER_ARCSEC,
             "samples_by_mode": {name: int(np.sum(obs.mode == code)) for code, name in MODE_NAMES.items()},
         },
-        "star_tracker_noise_arcsec": _floats(cal.st_noise_rad / ARCSEC_RAD),
-        "attitude_residual_rms_arcsec": _floats(residual_rms / ARCSEC_RAD),
+        "star_tracker_noise_arcsec": _floats(cal.st_noise_rad / RAD_PER_ARCSEC),
+        "attitude_residual_rms_arcsec": _floats(residual_rms / RAD_PER_ARCSEC),
         "n_slews": int(slews.start_s.size),
-        "slew_end_error_max_arcsec": float(np.max(slews.end_error_rad) / ARCSEC_RAD) if slews.start_s.size else None,
-        "slew_error_bound_max_arcsec": float(np.max(slews.bound_rad) / ARCSEC_RAD) if slews.start_s.size else None,
+        "slew_end_error_max_arcsec": (float(np.max(slews.end_error_rad) * ARCSEC_PER_RAD)
+                                      if slews.start_s.size else None),
+        "slew_error_bound_max_arcsec": float(np.max(slews.bound_rad) / RAD_PER_ARCSEC) if slews.start_s.size else None,
         "slew_bound_exceeded": int(np.sum(slews.end_error_rad > slews.bound_rad)),
-        "integration_error_max_arcsec": cal.integration_error_rad / ARCSEC_RAD,
+        "integration_error_max_arcsec": cal.integration_error_rad / RAD_PER_ARCSEC,
         "solver_disagreement_rad": est.solver_disagreement_rad,
         "calibration_complete": complete,
         "calibration": {
@@ -304,10 +304,10 @@ def _tables(cal: GyroCalibration, ns: Any) -> dict[str, dict[str, NDArray[Any]]]
     obs = cal.observer
     win = cal.windows
     est = cal.alignment
-    b = obs.drift_rad_s / ARCSEC_RAD
-    model = cal.drift_model(obs.t_s) / ARCSEC_RAD
+    b = obs.drift_rad_s / RAD_PER_ARCSEC
+    model = cal.drift_model(obs.t_s) / RAD_PER_ARCSEC
     post = rotations.quat_to_mrp(rotations.quat_multiply(rotations.quat_conjugate(obs.q_post),
-                                                         _measured(obs))) * 4.0 / ARCSEC_RAD
+                                                         _measured(obs))) * 4.0 / RAD_PER_ARCSEC
     mode_names = np.array([MODE_NAMES[int(m)] for m in range(4)], dtype=object)[obs.mode]
     tables: dict[str, dict[str, NDArray[Any]]] = {
         "drift": {
@@ -317,7 +317,7 @@ def _tables(cal: GyroCalibration, ns: Any) -> dict[str, dict[str, NDArray[Any]]]
         },
         "attitude_residuals": {
             "time_tai_ns": ns(obs.t_s), "mode": mode_names,
-            **{f"prior_{a}_arcsec": obs.innovation_rad[:, i] / ARCSEC_RAD for i, a in enumerate("xyz")},
+            **{f"prior_{a}_arcsec": obs.innovation_rad[:, i] / RAD_PER_ARCSEC for i, a in enumerate("xyz")},
             **{f"post_{a}_arcsec": post[:, i] for i, a in enumerate("xyz")},
         },
     }
@@ -330,25 +330,26 @@ def _tables(cal: GyroCalibration, ns: Any) -> dict[str, dict[str, NDArray[Any]]]
     t_mid = np.bincount(win.window, weights=win.t_s, minlength=win.starts.size) / np.maximum(counts, 1)
     tables["rate_coverage"] = {
         "time_tai_ns": ns(t_mid), "n_star_tracker_samples": (win.stops - win.starts).astype(np.int64),
-        "used": cal.windows_used.astype(bool), "mean_rate_deg_s": norm / DEG_RAD,
+        "used": cal.windows_used.astype(bool), "mean_rate_deg_s": norm / RAD_PER_DEG,
         **{f"direction_{a}": unit[:, i] for i, a in enumerate("xyz")},
-        **{f"fit_residual_{a}_arcsec": win.residual_rms_rad[:, i] / ARCSEC_RAD for i, a in enumerate("xyz")},
+        **{f"fit_residual_{a}_arcsec": win.residual_rms_rad[:, i] / RAD_PER_ARCSEC for i, a in enumerate("xyz")},
     }
     used_samples = cal.windows_used[win.window]
     t_used = win.t_s[used_samples]
     step = max(1, -(-t_used.size // RESIDUAL_TABLE_MAX_ROWS))
-    res = est.residual_rad_s[::step] / ARCSEC_RAD
+    res = est.residual_rad_s[::step] / RAD_PER_ARCSEC
     tables["rate_residuals"] = {
         "time_tai_ns": ns(t_used[::step]),
-        "rate_deg_s": np.linalg.norm(win.w_A_rad_s[used_samples][::step], axis=-1) / DEG_RAD,
+        "rate_deg_s": np.linalg.norm(win.w_A_rad_s[used_samples][::step], axis=-1) / RAD_PER_DEG,
         **{f"residual_{a}_arcsec_s": res[:, i] for i, a in enumerate("xyz")},
     }
     slews = cal.slews
     assert slews is not None
     tables["slews"] = {
         "time_tai_ns": ns(slews.start_s), "end_tai_ns": ns(slews.end_s), "duration_s": slews.end_s - slews.start_s,
-        "rotation_angle_deg": slews.rotation_angle_rad / DEG_RAD, "peak_rate_deg_s": slews.peak_rate_rad_s / DEG_RAD,
-        "end_error_arcsec": slews.end_error_rad / ARCSEC_RAD, "bound_arcsec": slews.bound_rad / ARCSEC_RAD,
+        "rotation_angle_deg": slews.rotation_angle_rad * DEG_PER_RAD,
+        "peak_rate_deg_s": slews.peak_rate_rad_s * DEG_PER_RAD,
+        "end_error_arcsec": slews.end_error_rad / RAD_PER_ARCSEC, "bound_arcsec": slews.bound_rad / RAD_PER_ARCSEC,
     }
     return tables
 

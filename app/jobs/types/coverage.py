@@ -11,8 +11,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from app.jobs.registry import JobType
 from processing.screening.coverage import find_gaps
 from processing.tasks import Progress, TaskInputs, TaskResult
-
-NS = 1e9
+from processing.units import NS_PER_S
 
 
 class Params(BaseModel):
@@ -36,17 +35,17 @@ def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
             entry: dict[str, Any] = {
                 "stream": name, "sensor": sensor, "n_samples": int(np.sum(sensors == sensor)),
                 "n_epochs": int(t.size), "first_tai_ns": int(t[0]), "last_tai_ns": int(t[-1]),
-                "leading_s": (int(t[0]) - inputs.start_tai_ns) / NS,
-                "trailing_s": (inputs.end_tai_ns - int(t[-1])) / NS,
+                "leading_s": (int(t[0]) - inputs.start_tai_ns) / NS_PER_S,
+                "trailing_s": (inputs.end_tai_ns - int(t[-1])) / NS_PER_S,
             }
             if t.size >= 2:
                 gaps = find_gaps(t, factor=params.gap_factor)
                 expected = (int(t[-1]) - int(t[0])) / gaps.nominal_period_ns + 1
                 entry.update(
-                    period_s=gaps.nominal_period_ns / NS, n_gaps=gaps.count,
-                    gap_total_s=float(gaps.duration_ns.sum()) / NS, missing_samples=int(gaps.missing.sum()),
+                    period_s=gaps.nominal_period_ns / NS_PER_S, n_gaps=gaps.count,
+                    gap_total_s=float(gaps.duration_ns.sum()) / NS_PER_S, missing_samples=int(gaps.missing.sum()),
                     completeness=float(t.size / expected),
-                    gaps=[{"before_tai_ns": int(b), "after_tai_ns": int(a), "duration_s": (a - b) / NS,
+                    gaps=[{"before_tai_ns": int(b), "after_tai_ns": int(a), "duration_s": (a - b) / NS_PER_S,
                            "missing": int(m)}
                           for b, a, m in zip(gaps.before_tai_ns, gaps.after_tai_ns, gaps.missing, strict=True)],
                 )
@@ -54,7 +53,7 @@ def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
                 gap_rows["sensor"] += [sensor] * gaps.count
                 gap_rows["before_tai_ns"] += gaps.before_tai_ns.tolist()
                 gap_rows["after_tai_ns"] += gaps.after_tai_ns.tolist()
-                gap_rows["duration_s"] += (gaps.duration_ns / NS).tolist()
+                gap_rows["duration_s"] += (gaps.duration_ns / NS_PER_S).tolist()
                 gap_rows["missing"] += gaps.missing.tolist()
             else:
                 entry.update(period_s=None, n_gaps=0, gap_total_s=0.0, missing_samples=0, completeness=None,
@@ -85,10 +84,11 @@ def figures(result: TaskResult, params: Params) -> dict[str, Figure]:
     ax = fig.add_subplot()
     t0 = result.summary["window_start_tai_ns"]
     for i, s in enumerate(streams):
-        ax.broken_barh([((s["first_tai_ns"] - t0) / NS, (s["last_tai_ns"] - s["first_tai_ns"]) / NS)], (i - 0.3, 0.6),
+        span = ((s["first_tai_ns"] - t0) / NS_PER_S, (s["last_tai_ns"] - s["first_tai_ns"]) / NS_PER_S)
+        ax.broken_barh([span], (i - 0.3, 0.6),
                        color="tab:green")
         for g in s["gaps"]:
-            ax.broken_barh([((g["before_tai_ns"] - t0) / NS, g["duration_s"])], (i - 0.3, 0.6), color="tab:red")
+            ax.broken_barh([((g["before_tai_ns"] - t0) / NS_PER_S, g["duration_s"])], (i - 0.3, 0.6), color="tab:red")
     ax.set_yticks(range(len(streams)), [f"{s['stream']} / {s['sensor']}" for s in streams])
     ax.set_xlabel("time since window start [s]")
     ax.set_title("Coverage (green) and gaps (red)")

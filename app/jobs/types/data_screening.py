@@ -18,8 +18,8 @@ from app.jobs.registry import JobType
 from processing.screening.criteria import ScreeningParams, screen
 from processing.screening.flags import flags_table
 from processing.tasks import Progress, TaskError, TaskInputs, TaskResult
+from processing.units import NS_PER_S
 
-NS_PER_S = 1e9
 SCREENABLE = ("gnss", "magnetometer", "panel_currents", "gnss_visibility", "star_tracker", "gyro",
               "gyro_increments", "sun_sensor", "magnetorquer")
 STATISTIC_CRITERIA = ("energy", "field_magnitude", "panel_eclipse", "panel_sun_norm", "orbit_plane", "velocity")

@@ -19,7 +19,6 @@ from pydantic import BaseModel, ConfigDict, Field, PositiveFloat
 from app.jobs.registry import JobType
 from processing.attitude import rotations
 from processing.gyro_calibration.bias_fit import (
-    ARCSEC_RAD,
     GyroBiasFit,
     GyroBiasFitError,
     estimate_gyro_arw,
@@ -30,9 +29,8 @@ from processing.gyro_calibration.bias_fit import (
 from processing.signal.sine_series import SineSeriesError, fit_sine_series, select_harmonics
 from processing.tasks import Progress, TaskError, TaskInputs, TaskResult
 from processing.time.timescales import tai_ns_to_iso
+from processing.units import NS_PER_S, RAD_PER_ARCSEC, RAD_PER_DEG
 
-NS_PER_S = 1_000_000_000
-DEG_RAD = np.pi / 180.0
 RATES_TABLE_MAX_ROWS = 20_000
 """The "rates" table (figure 13a) keeps every k-th gyro sample so that it has at most this many rows."""
 MAX_SMOOTHING_HARMONICS = 400
@@ -225,7 +223,7 @@ def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
         fit = fit_gyro_bias(
             t_g, w_fit, t_st, q_IS, q_RS=q_RS, sensor_index=sensor_index,
             estimate_mounting=params.estimate_mounting,
-            mounting_sigma_max_rad=params.mounting_sigma_max_arcsec * ARCSEC_RAD,
+            mounting_sigma_max_rad=params.mounting_sigma_max_arcsec * RAD_PER_ARCSEC,
             **common,  # type: ignore[arg-type]
         )
     except GyroBiasFitError as exc:
@@ -286,7 +284,7 @@ def _report(
     q_BR = rotations.quat_multiply(q_BG, rotations.quat_conjugate(fit.q_RG))
     q_IB0 = rotations.quat_canonical(rotations.quat_multiply(fit.q_IR0, rotations.quat_conjugate(q_BR)))
     t0_ns = epoch + int(round(fit.t0_s * NS_PER_S))
-    arcsec = 1.0 / ARCSEC_RAD
+    arcsec = 1.0 / RAD_PER_ARCSEC
 
     sub_rows = []
     for (a, e), fit_k, (kind, parts, index) in zip(edges, subs, kinds, strict=True):
@@ -385,11 +383,11 @@ def _report(
     }
     stride = max(1, -(-t_g_ns.size // RATES_TABLE_MAX_ROWS))
     r_bg = rotations.quat_to_dcm(q_BG)
-    w_B = (w_G[::stride] @ r_bg.T - b) / DEG_RAD
+    w_B = (w_G[::stride] @ r_bg.T - b) / RAD_PER_DEG
     rates: dict[str, NDArray[Any]] = {"time_tai_ns": t_g_ns[::stride]}
     rates.update({f"w{i + 1}_B_deg_s": w_B[:, i] for i in range(3)})
     if w_ap is not None:
-        w_ap_B = (w_ap[::stride] @ r_bg.T - b) / DEG_RAD
+        w_ap_B = (w_ap[::stride] @ r_bg.T - b) / RAD_PER_DEG
         rates.update({f"w{i + 1}_B_ap_deg_s": w_ap_B[:, i] for i in range(3)})
     sub_table: dict[str, NDArray[Any]] = {
         "kind": np.array([r["kind"] for r in sub_rows], dtype=object),

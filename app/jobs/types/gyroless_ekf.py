@@ -19,9 +19,7 @@ from app.jobs.registry import JobType
 from processing.gyroless.ekf import FilterTuning
 from processing.gyroless.estimation import GyrolessError, GyrolessResult, GyrolessSettings, estimate_gyroless_attitude
 from processing.tasks import Progress, TaskError, TaskInputs, TaskResult
-
-DEG = 180.0 / np.pi
-NS_PER_S = 1e9
+from processing.units import DEG_PER_RAD, NS_PER_S
 
 
 class Params(BaseModel):
@@ -91,10 +89,10 @@ def _summary(r: GyrolessResult, params: Params) -> dict[str, Any]:
     ts = (t - t[0]) / NS_PER_S
     conv = r.time_to_converge_s
     after = ts >= (conv if conv is not None else ts[-1] + 1)
-    sig = r.attitude_sigma_rad * DEG
+    sig = r.attitude_sigma_rad * DEG_PER_RAD
     outage = ~r.sun_used
     ns, wh = r.nis_stats, r.whiteness_stats
-    res = r.filtered.residual_rad * DEG
+    res = r.filtered.residual_rad * DEG_PER_RAD
 
     def rms(x: np.ndarray) -> float | None:
         x = x[np.isfinite(x)]
@@ -118,16 +116,16 @@ def _summary(r: GyrolessResult, params: Params) -> dict[str, Any]:
                       "fraction_outside": wh.fraction_outside, "max_abs_rho": wh.max_abs_rho,
                       "rho": wh.rho},
         "innovation_rms_deg": {"magnetometer": rms(res[:, 0]), "sun_sensor": rms(res[:, 1])},
-        "roll_deg": _stats(r.roll_rad * DEG),
-        "pitch_deg": _stats(r.pitch_rad * DEG),
-        "yaw_deg": _stats(r.yaw_rad * DEG),
+        "roll_deg": _stats(r.roll_rad * DEG_PER_RAD),
+        "pitch_deg": _stats(r.pitch_rad * DEG_PER_RAD),
+        "yaw_deg": _stats(r.yaw_rad * DEG_PER_RAD),
         "attitude_sigma_deg": {
             "median": np.median(sig, axis=0).tolist(),
             "max_after_convergence": (sig[after].max(axis=0).tolist() if np.any(after) else None),
             "max_in_sun_outage": (sig[outage].max(axis=0).tolist() if np.any(outage) else None),
             "axes": ["x", "y", "z"],
         },
-        "rate_sigma_deg_s": {"median": (np.median(r.rate_sigma_rad_s, axis=0) * DEG).tolist()},
+        "rate_sigma_deg_s": {"median": (np.median(r.rate_sigma_rad_s, axis=0) * DEG_PER_RAD).tolist()},
         "disturbance_N_m": {"mean": np.mean(r.tau_d_O_N_m, axis=0).tolist(), "axes": ["x_O", "y_O"]},
         "sun_used_fraction": float(np.mean(r.sun_used)),
         "sun_outages": _intervals(t, outage),
@@ -185,8 +183,9 @@ def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
     att = {
         "time_tai_ns": r.time_tai_ns,
         **{f"q{i}": r.q_OB[:, i] for i in range(4)},
-        "roll_deg": r.roll_rad * DEG, "pitch_deg": r.pitch_rad * DEG, "yaw_deg": r.yaw_rad * DEG,
-        **{f"sigma_{a}_deg": r.attitude_sigma_rad[:, i] * DEG for i, a in enumerate("xyz")},
+        "roll_deg": r.roll_rad * DEG_PER_RAD, "pitch_deg": r.pitch_rad * DEG_PER_RAD,
+        "yaw_deg": r.yaw_rad * DEG_PER_RAD,
+        **{f"sigma_{a}_deg": r.attitude_sigma_rad[:, i] * DEG_PER_RAD for i, a in enumerate("xyz")},
         **{f"w_bi_{a}_rad_s": r.omega_BI_B[:, i] for i, a in enumerate("xyz")},
         **{f"w_bo_{a}_rad_s": r.omega_BO_B[:, i] for i, a in enumerate("xyz")},
         **{f"w_sigma_{a}_rad_s": r.rate_sigma_rad_s[:, i] for i, a in enumerate("xyz")},
@@ -198,10 +197,13 @@ def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
         from processing.attitude.rigid_body import roll_pitch_yaw_004
 
         fr, fp, fy = roll_pitch_yaw_004(f.q_OB)
-        att.update({"roll_filtered_deg": fr * DEG, "pitch_filtered_deg": fp * DEG, "yaw_filtered_deg": fy * DEG,
-                    **{f"sigma_{a}_filtered_deg": f.attitude_sigma_rad[:, i] * DEG for i, a in enumerate("xyz")}})
+        att.update({"roll_filtered_deg": fr * DEG_PER_RAD, "pitch_filtered_deg": fp * DEG_PER_RAD,
+                    "yaw_filtered_deg": fy * DEG_PER_RAD,
+                    **{f"sigma_{a}_filtered_deg": f.attitude_sigma_rad[:, i] * DEG_PER_RAD
+                       for i, a in enumerate("xyz")}})
     innov = {"time_tai_ns": r.time_tai_ns, "nis": r.nis, "nis_dof": r.nis_dof,
-             "magnetometer_residual_deg": f.residual_rad[:, 0] * DEG, "sun_residual_deg": f.residual_rad[:, 1] * DEG}
+             "magnetometer_residual_deg": f.residual_rad[:, 0] * DEG_PER_RAD,
+             "sun_residual_deg": f.residual_rad[:, 1] * DEG_PER_RAD}
     return TaskResult(summary=summary, tables={"attitude": att, "innovations": innov}, notes=notes + r.notes)
 
 
@@ -253,8 +255,8 @@ def figures(result: TaskResult, params: Params) -> dict[str, Figure]:
     axes = fig.subplots(3, 1, sharex=True)
     for ax, a in zip(axes, "xyz", strict=True):
         _shade_outages(ax, result, t0)
-        w = np.asarray(att[f"w_bo_{a}_rad_s"]) * DEG
-        s = np.asarray(att[f"w_sigma_{a}_rad_s"]) * DEG
+        w = np.asarray(att[f"w_bo_{a}_rad_s"]) * DEG_PER_RAD
+        s = np.asarray(att[f"w_sigma_{a}_rad_s"]) * DEG_PER_RAD
         ax.plot(ts, w, lw=0.8)
         ax.fill_between(ts, w - s, w + s, alpha=0.25, lw=0)
         ax.set_ylabel(f"w_BO {a} [deg/s]")

@@ -23,8 +23,8 @@ from processing.frames.eop import EopCoverageError, interpolate_eop
 from processing.orbits.gnss_orbit import GnssFitError
 from processing.star_tracker.orbital_attitude import OrbitalAttitudeError, orbital_attitude, summary_of
 from processing.tasks import Progress, TaskError, TaskInputs, TaskResult
+from processing.units import NS_PER_S
 
-NS = 1e9
 EOP_KIND = "eop_finals2000a"
 AEM_FILE = "body_attitude.aem"
 
@@ -168,7 +168,7 @@ def figures(result: TaskResult, params: Params) -> dict[str, Figure]:
     ang = result.tables["angles"]
     det = result.tables["attitude_detail"]
     t0 = int(ang["time_tai_ns"][0])
-    minutes = (np.asarray(ang["time_tai_ns"], dtype=np.int64) - t0) / NS / 60.0
+    minutes = (np.asarray(ang["time_tai_ns"], dtype=np.int64) - t0) / NS_PER_S / 60.0
     names = (("pitch_deg", "pitch α"), ("yaw_deg", "yaw β"), ("roll_deg", "roll γ"))
     fig = Figure(figsize=(9, 7), label="Orbital attitude angles against time (003 fig. 11)")
     axes = fig.subplots(3, 1, sharex=True)

@@ -20,9 +20,8 @@ from processing.star_tracker.accuracy import (
     analyze_star_tracker_accuracy,
 )
 from processing.tasks import Progress, TaskError, TaskInputs, TaskResult
+from processing.units import ARCSEC_PER_RAD, NS_PER_S
 
-ARCSEC_PER_RAD = 180.0 * 3600.0 / np.pi
-NS_PER_S = 1e9
 MAX_GYRO_TABLE_ROWS = 20_000
 """The gyro comparison table is decimated (every k-th sample) to at most this many rows."""
 SPECTRUM_ZOOM_FACTOR = 4.0

@@ -16,6 +16,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from app.jobs.registry import JobType
 from processing.screening.criteria import ScreeningParams, screen
 from processing.tasks import Progress, TaskError, TaskInputs, TaskResult
+from processing.units import DEG_PER_RAD, NS_PER_S
 from processing.vector_attitude.determination import (
     VECTORS,
     VectorAttitudeError,
@@ -24,8 +25,6 @@ from processing.vector_attitude.determination import (
     vector_attitude,
 )
 
-NS_PER_S = 1e9
-DEG = 180.0 / np.pi
 METHOD_COLORS = {"q_method": "tab:blue", "quest": "tab:cyan", "svd": "tab:purple", "esoq2": "tab:olive",
                  "loosely_coupled": "tab:orange", "none": "tab:red"}
 
@@ -58,7 +57,7 @@ class Params(BaseModel):
 
 
 def _stats_deg(x: np.ndarray) -> dict[str, float | None]:
-    x = np.asarray(x, dtype=float) * DEG
+    x = np.asarray(x, dtype=float) * DEG_PER_RAD
     x = x[np.isfinite(x)]
     if x.size == 0:
         return {"mean": None, "std": None, "min": None, "max": None}
@@ -100,7 +99,7 @@ def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
     residuals = {}
     for j, v in enumerate(VECTORS):
         r = res.residual_rad[:, j]
-        r = r[np.isfinite(r)] * DEG
+        r = r[np.isfinite(r)] * DEG_PER_RAD
         residuals[v] = {"n": int(r.size), "rms_deg": float(np.sqrt(np.mean(r**2))) if r.size else None,
                         "p95_deg": float(np.percentile(r, 95)) if r.size else None}
     missing = {v: {str(k): int(c) for k, c in zip(*np.unique(obs.why[:, j].astype(str), return_counts=True),
@@ -112,7 +111,7 @@ def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
         "vectors_available": {v: int(obs.available[:, j].sum()) for j, v in enumerate(VECTORS)},
         "vectors_missing_reasons": missing,
         "residuals": residuals,
-        "bound99_deg_median": float(np.nanmedian(bound[ok]) * DEG) if np.any(ok & np.isfinite(bound)) else None,
+        "bound99_deg_median": float(np.nanmedian(bound[ok]) * DEG_PER_RAD) if np.any(ok & np.isfinite(bound)) else None,
         "pitch_deg": _stats_deg(res.pitch_rad), "yaw_deg": _stats_deg(res.yaw_rad),
         "roll_deg": _stats_deg(res.roll_rad),
         "screened": params.screen, "rejected_samples": rejected,
@@ -122,9 +121,10 @@ def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
     table: dict[str, np.ndarray] = {
         "time_tai_ns": res.time_tai_ns, "method": res.method.astype(object),
         **{f"q{i}": res.q_OB[:, i] for i in range(4)},
-        "pitch_deg": res.pitch_rad * DEG, "yaw_deg": res.yaw_rad * DEG, "roll_deg": res.roll_rad * DEG,
-        "loss": res.loss, "bound99_deg": bound * DEG,
-        **{f"residual_{v}_deg": res.residual_rad[:, j] * DEG for j, v in enumerate(VECTORS)},
+        "pitch_deg": res.pitch_rad * DEG_PER_RAD, "yaw_deg": res.yaw_rad * DEG_PER_RAD,
+        "roll_deg": res.roll_rad * DEG_PER_RAD,
+        "loss": res.loss, "bound99_deg": bound * DEG_PER_RAD,
+        **{f"residual_{v}_deg": res.residual_rad[:, j] * DEG_PER_RAD for j, v in enumerate(VECTORS)},
         **{f"used_{v}": res.used[:, j] for j, v in enumerate(VECTORS)},
         "reason": res.reason.astype(object),
     }

@@ -21,7 +21,8 @@ from processing.attitude.rigid_body import (
     sun_direction_O_004,
 )
 from processing.frames.orbital import dcm_IO_lvlh_004
-from processing.orbits.two_body import R_EARTH_M, circular_orbit_state, mean_motion_rad_s
+from processing.orbits.two_body import circular_orbit_state, mean_motion_rad_s
+from processing.units import R_EARTH_M
 
 J = np.diag(INERTIA_004_KG_M2)
 W0 = float(mean_motion_rad_s(R_EARTH_M + 650e3))

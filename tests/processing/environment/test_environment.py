@@ -43,12 +43,13 @@ from processing.environment import (
     sunlit_fraction,
 )
 from processing.environment.igrf import E_from_geodetic, dcm_E_ned, geodetic_from_E, igrf_gauss_coefficients_nT
-from processing.environment.sun import AU_M, _sun_pv_direct
+from processing.environment.sun import _sun_pv_direct
 from processing.frames.earth_orientation import EarthOrientation, gcrs_to_itrs_mat, itrs_to_gcrs_state
 from processing.frames.earth_rotation_interp import gcrs_to_itrs_mat_interp, itrs_to_gcrs_state_interp
 from processing.frames.orbital import dcm_IO_003, dcm_IO_lvlh_004
-from processing.orbits.two_body import R_EARTH_M, circular_orbit_state, mean_motion_rad_s
+from processing.orbits.two_body import circular_orbit_state, mean_motion_rad_s
 from processing.time.timescales import TT_MINUS_TAI_NS, iso_to_tai_ns
+from processing.units import AU_M, R_EARTH_M
 from tests.real_data import REFERENCE
 
 DATA = REFERENCE

@@ -10,7 +10,6 @@ import pytest
 
 from processing.frames.earth_orientation import EarthOrientation, gcrs_to_itrs_mat
 from processing.frames.eop import (
-    ARCSEC_RAD,
     EopCoverageError,
     EopFormatError,
     interpolate_eop,
@@ -19,6 +18,7 @@ from processing.frames.eop import (
     parse_finals2000a_reference,
 )
 from processing.time import timescales
+from processing.units import RAD_PER_ARCSEC
 from tests.real_data import REFERENCE
 
 DATA = REFERENCE / "finals2000A_2017-01-01_04.txt"
@@ -69,7 +69,7 @@ def test_interpolation_reproduces_nodes_and_is_cubic_between():
     c = parse_finals2000a(DATA.read_bytes())
     e = interpolate_eop(c, c["time_tai_ns"], source="test")
     np.testing.assert_allclose(e.dut1_s, c["dut1_s"], rtol=0, atol=1e-12)
-    np.testing.assert_allclose(e.xp_rad, c["xp_arcsec"] * ARCSEC_RAD, rtol=0, atol=1e-18)
+    np.testing.assert_allclose(e.xp_rad, c["xp_arcsec"] * RAD_PER_ARCSEC, rtol=0, atol=1e-18)
     assert e.source == "test"
     # 4-point Lagrange reproduces cubics exactly.
     x = np.array([0.0, 1.0, 2.0, 3.0, 4.5])

@@ -16,7 +16,6 @@ import pytest
 
 from processing.frames.earth_orientation import (
     INERTIAL_FRAMES,
-    OMEGA_EARTH_RAD_S,
     EarthOrientation,
     FrameInputError,
     UnknownFrameError,
@@ -40,8 +39,9 @@ from processing.frames.earth_orientation import (
     itrs_to_inertial_state,
     teme_to_itrs_mat,
 )
-from processing.orbits.two_body import MU_EARTH_M3_S2, R_EARTH_M, circular_orbit_state
+from processing.orbits.two_body import circular_orbit_state
 from processing.time.timescales import iso_to_tai_ns, tai_ns_from_jd, tai_ns_to_jd, tai_ns_to_ut1_jd
+from processing.units import MU_EARTH_M3_S2, OMEGA_EARTH_RAD_S, R_EARTH_M
 
 ARCSEC_RAD = np.pi / (180.0 * 3600.0)
 

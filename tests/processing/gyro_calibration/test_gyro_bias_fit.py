@@ -13,7 +13,6 @@ import pytest
 
 from processing.attitude import rotations as rot
 from processing.gyro_calibration.bias_fit import (
-    ARCSEC_RAD,
     GyroBiasFit,
     GyroBiasFitError,
     estimate_gyro_arw,
@@ -21,7 +20,8 @@ from processing.gyro_calibration.bias_fit import (
     fit_subintervals,
     subinterval_edges,
 )
-from processing.simulate.seed003 import DEG_RAD, Scenario003, simulate_seed003
+from processing.simulate.seed003 import Scenario003, simulate_seed003
+from processing.units import RAD_PER_ARCSEC, RAD_PER_DEG
 
 T0_NS = 1_900_000_000 * 1_000_000_000
 N_SEEDS = 100
@@ -117,25 +117,25 @@ def test_residual_rms_is_star_tracker_noise_plus_integrated_gyro_noise(stats: St
     expected rms (4.92, 6.54, 15.59)"."""
     m = stats.n_samples.mean()
     expected = np.sqrt(ST_SIGMA_ARCSEC**2 * (1 - 6 / (3 * m)) + ARW_ARCSEC_SQRT_S**2 * 1200.0 / 15.0)
-    measured = np.sqrt(np.mean(stats.rms**2, axis=0)) / ARCSEC_RAD
+    measured = np.sqrt(np.mean(stats.rms**2, axis=0)) / RAD_PER_ARCSEC
     np.testing.assert_allclose(measured, expected, rtol=0.05)
     # the fit's own prediction of the gyro part (exact for the rotating geometry) agrees more closely
-    predicted = np.sqrt(ST_SIGMA_ARCSEC**2 * (1 - 6 / (3 * m)) + np.mean(stats.rms_gyro**2, axis=0) / ARCSEC_RAD**2)
+    predicted = np.sqrt(ST_SIGMA_ARCSEC**2 * (1 - 6 / (3 * m)) + np.mean(stats.rms_gyro**2, axis=0) / RAD_PER_ARCSEC**2)
     np.testing.assert_allclose(measured, predicted, rtol=0.03)
-    np.testing.assert_allclose(np.mean(stats.rms_gyro, axis=0) / ARCSEC_RAD, 4.24, rtol=0.05)
+    np.testing.assert_allclose(np.mean(stats.rms_gyro, axis=0) / RAD_PER_ARCSEC, 4.24, rtol=0.05)
 
 
 def test_star_tracker_noise_recovered_after_removing_the_gyro_part(stats: Stats) -> None:
     # x2 and x3 (5", 15") stand out of the 4.3" gyro part; x1 (2.5") is mostly gyro noise and is noisy
-    mean = np.mean(stats.st_sigma, axis=0) / ARCSEC_RAD
+    mean = np.mean(stats.st_sigma, axis=0) / RAD_PER_ARCSEC
     np.testing.assert_allclose(mean[1:], ST_SIGMA_ARCSEC[1:], rtol=0.1)
     assert 1.0 < mean[0] < 4.0
 
 
 def test_gyro_noise_estimated_from_the_rates(stats: Stats) -> None:
     # one estimate: ~1.2 % relative std (12,000 correlated second differences); 300 of them
-    np.testing.assert_allclose(stats.arw / ARCSEC_RAD, ARW_ARCSEC_SQRT_S, rtol=0.05)
-    np.testing.assert_allclose(np.mean(stats.arw) / ARCSEC_RAD, ARW_ARCSEC_SQRT_S, rtol=0.005)
+    np.testing.assert_allclose(stats.arw / RAD_PER_ARCSEC, ARW_ARCSEC_SQRT_S, rtol=0.05)
+    np.testing.assert_allclose(np.mean(stats.arw) / RAD_PER_ARCSEC, ARW_ARCSEC_SQRT_S, rtol=0.005)
     t = np.arange(20000) * 0.1
     w = np.random.default_rng(0).normal(0, 2e-5, (20000, 3)) + 1e-3 * np.sin(1e-2 * t)[:, None]
     np.testing.assert_allclose(estimate_gyro_arw(t, w), 2e-5 * np.sqrt(0.1), rtol=0.02)
@@ -146,11 +146,11 @@ def test_noise_free_data_give_the_truth() -> None:
     for scheme in (1, 2):
         f = fit_gyro_bias(*arrays(sc), q_RG=q_SG(sc), scheme=scheme, gyro_arw_rad_sqrt_s=0.0)
         assert f.converged
-        np.testing.assert_allclose(f.delta_R_rad_s, delta_true(sc), atol=1e-5 * ARCSEC_RAD)
+        np.testing.assert_allclose(f.delta_R_rad_s, delta_true(sc), atol=1e-5 * RAD_PER_ARCSEC)
         # truncation error only: linear rate interpolation across the 0.4 Hz, 3" vibration, ~0.01"
-        assert np.max(f.residual_rms_rad) < 0.03 * ARCSEC_RAD
+        assert np.max(f.residual_rms_rad) < 0.03 * RAD_PER_ARCSEC
         q_IS0 = rot.quat_multiply(sc.truth.q_IB_gyro[0], sc.truth.q_BS)
-        assert rot.angle_between(f.q_IR0, q_IS0) < 0.05 * ARCSEC_RAD
+        assert rot.angle_between(f.q_IR0, q_IS0) < 0.05 * RAD_PER_ARCSEC
 
 
 def test_both_schemes_agree_to_their_truncation_error() -> None:
@@ -170,7 +170,7 @@ def test_residuals_are_model_to_measurement_rotations_in_sensor_axes() -> None:
     rv = rot.quat_to_rotvec(rot.quat_multiply(rot.quat_conjugate(f.q_IR_model), q[perm]))
     np.testing.assert_allclose(f.residuals_rad, rv, atol=1e-12)
     # the residual of the truth model would be the injected noise minus the integrated gyro noise: same size
-    assert np.all(np.abs(f.residuals_rad.std(axis=0) / ARCSEC_RAD - [5, 6.5, 15.5]) < [2.5, 3, 4])
+    assert np.all(np.abs(f.residuals_rad.std(axis=0) / RAD_PER_ARCSEC - [5, 6.5, 15.5]) < [2.5, 3, 4])
 
 
 def test_sigma_w_is_the_papers_formula() -> None:
@@ -184,7 +184,7 @@ def test_sigma_w_is_the_papers_formula() -> None:
 
 
 def test_slowly_drifting_offset_is_visible_in_the_subintervals() -> None:
-    drift_G = np.array([1.0, -1.0, 0.5]) * ARCSEC_RAD / 1200.0  # 1"/s over the segment
+    drift_G = np.array([1.0, -1.0, 0.5]) * RAD_PER_ARCSEC / 1200.0  # 1"/s over the segment
     sc = simulate(5, gyro_bias_drift_rad_s2=tuple(drift_G))
     t_g, w, t_s, q = arrays(sc)
     whole = fit_gyro_bias(t_g, w, t_s, q, q_RG=q_SG(sc))
@@ -210,30 +210,30 @@ def test_mounting_is_not_determinable_in_earth_pointing() -> None:
     """003 §2.4: refining Q on these arcs gave clearly wrong values; the fit must say so."""
     sc = simulate(7)
     t_g, w, t_s, q = arrays(sc)
-    eps = np.array([60.0, -40.0, 80.0]) * ARCSEC_RAD
+    eps = np.array([60.0, -40.0, 80.0]) * RAD_PER_ARCSEC
     q_RG_wrong = rot.quat_multiply(rot.rotvec_to_quat(-eps), q_SG(sc))
     f = fit_gyro_bias(t_g, w, t_s, q, q_RG=q_RG_wrong, estimate_mounting=True)
     assert f.mounting is not None and not f.mounting.determinable
     assert f.mounting.rotvec_R_rad is None
     assert "not determinable" in f.mounting.reason
-    assert np.all(f.mounting.sigma_rad > 300 * ARCSEC_RAD)
+    assert np.all(f.mounting.sigma_rad > 300 * RAD_PER_ARCSEC)
     assert f.mounting.max_abs_correlation > 0.99
     assert f.parameter_names == ("z1", "z2", "z3", "delta1", "delta2", "delta3")  # fell back to the given Q
     np.testing.assert_allclose(f.q_RG, q_RG_wrong, atol=1e-15)
 
 
 def test_mounting_is_recovered_with_large_rate_variations() -> None:
-    amp = 15.0 * DEG_RAD  # agile-like motion: rates up to ~0.25 deg/s
+    amp = 15.0 * RAD_PER_DEG  # agile-like motion: rates up to ~0.25 deg/s
     sc = simulate(7, pitch_amplitude_rad=amp, yaw_amplitude_rad=amp, roll_amplitude_rad=amp)
     t_g, w, t_s, q = arrays(sc)
-    eps = np.array([60.0, -40.0, 80.0]) * ARCSEC_RAD
+    eps = np.array([60.0, -40.0, 80.0]) * RAD_PER_ARCSEC
     q_RG_wrong = rot.quat_multiply(rot.rotvec_to_quat(-eps), q_SG(sc))
     fixed = fit_gyro_bias(t_g, w, t_s, q, q_RG=q_RG_wrong)
     f = fit_gyro_bias(t_g, w, t_s, q, q_RG=q_RG_wrong, estimate_mounting=True)
     assert f.mounting is not None and f.mounting.determinable, f.mounting
     assert f.mounting.rotvec_R_rad is not None
     assert np.all(np.abs(f.mounting.rotvec_R_rad - eps) <= 4 * f.mounting.sigma_rad)
-    assert np.all(f.mounting.sigma_rad < 30 * ARCSEC_RAD)
+    assert np.all(f.mounting.sigma_rad < 30 * RAD_PER_ARCSEC)
     assert rot.angle_between(f.q_RG, q_SG(sc)) < 4 * np.linalg.norm(f.mounting.sigma_rad)
     assert np.all(np.abs(f.delta_R_rad_s - delta_true(sc)) <= 4 * f.sigma[3:6])
     assert np.all(f.residual_rms_rad < fixed.residual_rms_rad)
@@ -246,7 +246,7 @@ def test_two_star_trackers_fitted_jointly() -> None:
     rng = np.random.default_rng(8)
     q_BS2 = rot.quat_multiply(sc.truth.q_BS, rot.quat_from_axis_angle([1.0, 0.0, 0.0], -np.pi / 2))
     sel = np.arange(0, t_s.size, 2)
-    noise = rng.normal(size=(sel.size, 3)) * ST_SIGMA_ARCSEC * ARCSEC_RAD
+    noise = rng.normal(size=(sel.size, 3)) * ST_SIGMA_ARCSEC * RAD_PER_ARCSEC
     q2 = rot.quat_multiply(rot.quat_multiply(sc.truth.q_IB_st[sel], q_BS2), rot.rotvec_to_quat(noise))
     q_S1S2 = rot.quat_multiply(rot.quat_conjugate(sc.truth.q_BS), q_BS2)
     t_all = np.concatenate([t_s, t_s[sel]])

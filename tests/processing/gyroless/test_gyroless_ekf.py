@@ -22,7 +22,8 @@ from processing.gyroless.ekf import (
     triad_q_OB,
 )
 from processing.gyroless.rts_smoother import rts_smooth
-from processing.orbits.two_body import R_EARTH_M, mean_motion_rad_s
+from processing.orbits.two_body import mean_motion_rad_s
+from processing.units import R_EARTH_M
 
 J = INERTIA_004_KG_M2
 W0 = float(mean_motion_rad_s(R_EARTH_M + 650e3))

@@ -9,9 +9,10 @@ import pytest
 from processing.estimation.consistency import chi_square_stats, nees
 from processing.gyroless.ekf import attitude_errors_rad
 from processing.gyroless.estimation import GyrolessError, GyrolessSettings, estimate_gyroless_attitude, hermite_state
-from processing.orbits.two_body import R_EARTH_M, circular_orbit_state
+from processing.orbits.two_body import circular_orbit_state
 from processing.simulate.seed004 import simulate_seed004
 from processing.time.timescales import iso_to_tai_ns
+from processing.units import R_EARTH_M
 
 T0 = int(iso_to_tai_ns(["2025-03-20T12:00:00"])[0])
 

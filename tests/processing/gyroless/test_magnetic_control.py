@@ -13,7 +13,8 @@ from processing.gyroless.magnetic_control import (
     lqr_state,
     saturate_dipole,
 )
-from processing.orbits.two_body import R_EARTH_M, mean_motion_rad_s
+from processing.orbits.two_body import mean_motion_rad_s
+from processing.units import R_EARTH_M
 
 J = np.array(INERTIA_004_KG_M2)
 A_M = R_EARTH_M + 650e3

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from processing.formats.rinex_nav import parse_rinex_nav
-from processing.frames.earth_orientation import OMEGA_EARTH_RAD_S
 from processing.orbits import gnss_ephemeris as ge
+from processing.units import OMEGA_EARTH_RAD_S
 from tests.real_data import GNSS_NAV
 
 NAV_DIR = GNSS_NAV

@@ -1,12 +1,9 @@
-"""Tests of processing.orbits.two_body: circular two-body states, J2 node rate, sun-synchronous inclination."""
+"""Tests of processing.orbits.two_body: circular two-body states, J2_EARTH node rate, sun-synchronous inclination."""
 
 import numpy as np
 import pytest
 
 from processing.orbits.two_body import (
-    J2,
-    MU_EARTH_M3_S2,
-    R_EARTH_M,
     SUN_MEAN_MOTION_RAD_S,
     OrbitInputError,
     circular_orbit_state,
@@ -15,15 +12,16 @@ from processing.orbits.two_body import (
     specific_energy_j_kg,
     sun_synchronous_inclination_rad,
 )
+from processing.units import J2_EARTH, MU_EARTH_M3_S2, R_EARTH_M
 
 A_830_M = R_EARTH_M + 830e3
 
 
 def test_constants_are_the_published_values():
-    # GM and a of WGS 84 (NGA.STND.0036); J2 of EGM96 from its normalised C20bar = -0.484165371736e-3.
+    # GM and a of WGS 84 (NGA.STND.0036); J2_EARTH of EGM96 from its normalised C20bar = -0.484165371736e-3.
     assert MU_EARTH_M3_S2 == 3.986004418e14
     assert R_EARTH_M == 6378137.0
-    assert J2 == pytest.approx(-np.sqrt(5.0) * -0.484165371736e-3, rel=1e-8)
+    assert J2_EARTH == pytest.approx(-np.sqrt(5.0) * -0.484165371736e-3, rel=1e-8)
     assert SUN_MEAN_MOTION_RAD_S == pytest.approx(2 * np.pi / (365.2421897 * 86400.0), rel=1e-15)
 
 
@@ -93,7 +91,7 @@ def test_sun_synchronous_node_rate_equals_sun_mean_motion():
 
 
 def test_j2_raan_rate_hand_computed():
-    # -3/2 n J2 (R/p)^2 cos i at a = 7000 km, e = 0.1, i = 50 deg, written out
+    # -3/2 n J2_EARTH (R/p)^2 cos i at a = 7000 km, e = 0.1, i = 50 deg, written out
     a, e, inc = 7000e3, 0.1, np.deg2rad(50.0)
     n = np.sqrt(3.986004418e14 / a**3)
     p = a * (1 - e**2)

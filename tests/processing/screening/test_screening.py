@@ -111,7 +111,8 @@ def test_j2_aware_energy_against_two_body() -> None:
 
 
 def test_energy_h_of_a_two_body_orbit_is_constant() -> None:
-    from processing.orbits.two_body import MU_EARTH_M3_S2, circular_orbit_state
+    from processing.orbits.two_body import circular_orbit_state
+    from processing.units import MU_EARTH_M3_S2
 
     t = np.arange(0, 6000, 10.0)
     r_I, v_I = circular_orbit_state(t, 7.0e6, 1.7, 0.3, 0.1)

@@ -4,10 +4,8 @@ import numpy as np
 import pytest
 
 from processing.attitude import rotations
-from processing.orbits.two_body import R_EARTH_M, sun_synchronous_inclination_rad
+from processing.orbits.two_body import sun_synchronous_inclination_rad
 from processing.simulate.seed000 import (
-    ARCSEC_RAD,
-    DEG_RAD,
     GYRO_PERIOD_NS,
     Q_OB_NADIR,
     Scenario000,
@@ -17,6 +15,7 @@ from processing.simulate.seed000 import (
 )
 from processing.streams import STREAMS
 from processing.time.timescales import iso_to_tai_ns
+from processing.units import R_EARTH_M, RAD_PER_ARCSEC, RAD_PER_DEG
 from tests.processing.helpers import assert_same_streams, chi2_bounds
 
 START = int(iso_to_tai_ns("2016-06-01T00:00:00"))
@@ -73,7 +72,7 @@ def test_grids(scenario):
 def test_calibration_errors_drawn_in_their_ranges():
     for seed in range(8):
         p = simulate_seed000(start_tai_ns=START, duration_s=1.0, seed=seed).parameters
-        mis = np.abs(np.asarray(p["misalignment_rad"])) / ARCSEC_RAD
+        mis = np.abs(np.asarray(p["misalignment_rad"])) / RAD_PER_ARCSEC
         assert np.all((mis >= 20) & (mis <= 60))  # "tens of arcseconds"
         assert 0.001 <= abs(p["scale_factor_error"]) <= 0.005  # "a few tenths of a percent"
     s = simulate_seed000(start_tai_ns=START, duration_s=1.0, misalignment_rad=(1e-4, 0.0, -2e-4),
@@ -86,24 +85,24 @@ def test_orbit_is_720_km_sun_synchronous(scenario):
     tr = scenario.truth
     assert tr.a_m == R_EARTH_M + 720e3
     assert tr.inc_rad == pytest.approx(float(sun_synchronous_inclination_rad(tr.a_m)))
-    assert 98.0 < tr.inc_rad / DEG_RAD < 98.5
+    assert 98.0 < tr.inc_rad / RAD_PER_DEG < 98.5
 
 
 def test_maneuver_plan():
     plan = plan_maneuvers(
         3600.0, np.random.default_rng(2), mean_motion=1.05e-3, initial_hold_s=120.0, slew_duration_s=(40.0, 60.0),
-        slew_peak_rate_rad_s=(2 * DEG_RAD, 5 * DEG_RAD), scan_duration_s=(60.0, 120.0),
-        scan_peak_rate_rad_s=(0.3 * DEG_RAD, 0.9 * DEG_RAD), hold_duration_s=(0.0, 10.0),
+        slew_peak_rate_rad_s=(2 * RAD_PER_DEG, 5 * RAD_PER_DEG), scan_duration_s=(60.0, 120.0),
+        scan_peak_rate_rad_s=(0.3 * RAD_PER_DEG, 0.9 * RAD_PER_DEG), hold_duration_s=(0.0, 10.0),
     )
     assert plan.kind[0] == "hold" and plan.duration_s[0] == 120.0  # orbital orientation first
     np.testing.assert_allclose(plan.start_s[1:], plan.start_s[:-1] + plan.duration_s[:-1])
     slews, scans = plan.kind == "slew", plan.kind == "scan"
     assert slews.sum() >= 15 and scans.sum() >= 15
-    peak_slew = plan.peak_rate_rad_s[slews] / DEG_RAD
+    peak_slew = plan.peak_rate_rad_s[slews] / RAD_PER_DEG
     assert np.all((peak_slew >= 2.0) & (peak_slew <= 5.0)) and peak_slew[0] == 5.0
     d = plan.duration_s[slews]
     assert np.all((d >= 40.0) & (d <= 60.0)) and d[0] == 60.0  # the worst case first
-    assert np.all(plan.peak_rate_rad_s[scans] < 1.0 * DEG_RAD)
+    assert np.all(plan.peak_rate_rad_s[scans] < 1.0 * RAD_PER_DEG)
     np.testing.assert_allclose(np.linalg.norm(plan.axis_B, axis=-1), 1.0, rtol=1e-14)
     # the rate is continuous across segment boundaries and reaches the peaks in the middle
     t_b = plan.start_s[1:]
@@ -131,7 +130,7 @@ def test_increments_follow_eq1(scenario):
     expected = (1.0 + tr.scale_factor_error) * rotations.quat_rotate(tr.q_GS, integral)
     noise = incr - expected
     sigma = tr.gyro_noise_std_rad
-    assert sigma == pytest.approx(0.001 * ARCSEC_RAD)
+    assert sigma == pytest.approx(0.001 * RAD_PER_ARCSEC)
     lo, hi = chi2_bounds(noise.shape[0])
     ratio = np.mean(noise**2, axis=0) / sigma**2
     assert np.all((ratio > lo) & (ratio < hi)), ratio
@@ -145,7 +144,7 @@ def test_increments_follow_eq1(scenario):
     # the truth helper: drift in the measured rate
     np.testing.assert_allclose(
         tr.drift_G_rad_s(10.0),
-        (1 + tr.scale_factor_error) * rotations.quat_rotate(tr.q_GS, [1.0, -0.8, 0.3]) * ARCSEC_RAD,
+        (1 + tr.scale_factor_error) * rotations.quat_rotate(tr.q_GS, [1.0, -0.8, 0.3]) * RAD_PER_ARCSEC,
         rtol=1e-14,
     )
 
@@ -156,7 +155,7 @@ def test_star_tracker_noise(scenario):
     q = np.stack([st[f"q{i}"] for i in range(4)], axis=-1)
     residual = rotations.quat_to_rotvec(rotations.quat_multiply(rotations.quat_conjugate(tr.q_IS_st), q))
     np.testing.assert_allclose(residual, tr.st_noise_rotvec_S, atol=1e-14)
-    np.testing.assert_allclose(tr.st_noise_std_rad, 0.3 * ARCSEC_RAD)
+    np.testing.assert_allclose(tr.st_noise_std_rad, 0.3 * RAD_PER_ARCSEC)
     lo, hi = chi2_bounds(residual.shape[0])
     ratio = np.mean(residual**2, axis=0) / tr.st_noise_std_rad**2
     assert np.all((ratio > lo) & (ratio < hi))
@@ -189,9 +188,9 @@ def test_rate_integrates_to_the_attitude(scenario):
         q = rotations.quat_multiply(q, step)
         out.append(q)
     err = rotations.angle_between(np.array(out), tr.q_IS(np.arange(301.0)))
-    assert err.max() < 1e-3 * ARCSEC_RAD, err.max() / ARCSEC_RAD
+    assert err.max() < 1e-3 * RAD_PER_ARCSEC, err.max() / RAD_PER_ARCSEC
     # and the scenario really slews: more than 100 deg turned in the first 300 s
-    assert rotations.angle_between(tr.q_IS(0.0), tr.q_IS(180.0)) > 100 * DEG_RAD
+    assert rotations.angle_between(tr.q_IS(0.0), tr.q_IS(180.0)) > 100 * RAD_PER_DEG
 
 
 @pytest.mark.parametrize(

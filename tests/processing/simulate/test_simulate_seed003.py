@@ -11,8 +11,6 @@ from processing.frames.orbital import q_IO_003
 from processing.orbits.two_body import specific_energy_j_kg
 from processing.simulate.orbital_attitude_model import SinusoidSeries, body_rate_from_pitch_yaw_roll
 from processing.simulate.seed003 import (
-    ARCSEC_RAD,
-    DEG_RAD,
     Scenario003,
     Seed003ParameterError,
     gap_mask,
@@ -22,10 +20,11 @@ from processing.simulate.seed003 import (
 )
 from processing.streams import STREAMS
 from processing.time.timescales import iso_to_tai_ns
+from processing.units import RAD_PER_ARCSEC, RAD_PER_DEG
 from tests.processing.helpers import assert_same_streams, chi2_bounds
 
 START = int(iso_to_tai_ns("2009-12-01T10:00:00"))
-ALPHA = 15.0 * DEG_RAD
+ALPHA = 15.0 * RAD_PER_DEG
 NS = 1_000_000_000
 
 
@@ -116,7 +115,7 @@ def test_star_tracker_noise_statistics(scenario):
     lo, hi = chi2_bounds(n)
     ratio = np.mean(residual**2, axis=0) / truth.st_noise_std_rad**2
     assert np.all((ratio > lo) & (ratio < hi)), (ratio, lo, hi)
-    np.testing.assert_allclose(truth.st_noise_std_rad, np.array([2.5, 5.0, 15.0]) * ARCSEC_RAD)
+    np.testing.assert_allclose(truth.st_noise_std_rad, np.array([2.5, 5.0, 15.0]) * RAD_PER_ARCSEC)
     # mean consistent with zero (4 sigma / sqrt(n))
     assert np.all(np.abs(residual.mean(axis=0)) < 4 * truth.st_noise_std_rad / np.sqrt(n))
 
@@ -126,10 +125,10 @@ def test_gyro_minus_truth_mean_is_the_bias(scenario):
     g = scenario.streams["gyro"]
     w = np.stack([g["wx"], g["wy"], g["wz"]], axis=-1)
     err = w - truth.w_B_gyro  # q_BG = identity
-    np.testing.assert_allclose(truth.gyro_bias0_rad_s, np.array([-1.84, 4.52, 0.55]) * ARCSEC_RAD)
+    np.testing.assert_allclose(truth.gyro_bias0_rad_s, np.array([-1.84, 4.52, 0.55]) * RAD_PER_ARCSEC)
     n = err.shape[0]
     sigma = truth.gyro_noise_std_rad_s
-    assert sigma == pytest.approx(1.5 * ARCSEC_RAD)
+    assert sigma == pytest.approx(1.5 * RAD_PER_ARCSEC)
     assert np.all(np.abs(err.mean(axis=0) - truth.gyro_bias0_rad_s) < 4 * sigma / np.sqrt(n))
     lo, hi = chi2_bounds(n)
     ratio = np.mean((err - truth.gyro_bias_rad_s) ** 2, axis=0) / sigma**2
@@ -137,7 +136,7 @@ def test_gyro_minus_truth_mean_is_the_bias(scenario):
 
 
 def test_gyro_bias_drift_and_mounting():
-    drift = np.array([1e-4, -2e-4, 5e-5]) * ARCSEC_RAD  # "/s per s
+    drift = np.array([1e-4, -2e-4, 5e-5]) * RAD_PER_ARCSEC  # "/s per s
     q_BG = rotations.quat_from_axis_angle([1.0, 2.0, 3.0], 0.2)
     s = simulate_seed003(start_tai_ns=START, seed=1, duration_s=600.0, gyro_bias_drift_rad_s2=tuple(drift),
                          q_BG=tuple(q_BG), gyro_noise_std_rad_s=0.0)
@@ -188,7 +187,7 @@ def test_integrating_body_rate_reproduces_attitude(scenario):
     q_int = _integrate(truth.model, t)
     err = rotations.angle_between(q_int, truth.q_IB_gyro)
     # RK4 at 0.1 s over 1200 s reaches ~1e-5 arcsec; the requirement is 0.01 arcsec
-    assert err.max() < 0.01 * ARCSEC_RAD, err.max() / ARCSEC_RAD
+    assert err.max() < 0.01 * RAD_PER_ARCSEC, err.max() / RAD_PER_ARCSEC
     # sensitivity: a rate error of 1e-9 rad/s (0.0002 "/s) about x already exceeds the bound
 
     class Offset:
@@ -197,7 +196,7 @@ def test_integrating_body_rate_reproduces_attitude(scenario):
             return dataclasses.replace(state, w_B=state.w_B + np.array([1e-9, 0.0, 0.0]))
 
     err_off = rotations.angle_between(_integrate(Offset(), t), truth.q_IB_gyro)
-    assert err_off.max() > 0.01 * ARCSEC_RAD
+    assert err_off.max() > 0.01 * RAD_PER_ARCSEC
 
 
 def test_body_rate_formula_matches_numerical_derivative():
@@ -229,9 +228,9 @@ def test_truth_quaternions_and_orbital_angles_are_consistent(scenario):
 
 def test_pitch_yaw_roll_ranges_and_vibration(scenario):
     truth = scenario.truth
-    deg = 1 / DEG_RAD
+    deg = 1 / RAD_PER_DEG
     assert np.abs(truth.pitch_rad).max() * deg < 0.4 and np.abs(truth.roll_rad).max() * deg < 0.4
-    assert np.abs(truth.yaw_rad - 1.2 * DEG_RAD).max() * deg <= 0.3
+    assert np.abs(truth.yaw_rad - 1.2 * RAD_PER_DEG).max() * deg <= 0.3
     assert 1.0 <= truth.yaw_rad.mean() * deg <= 1.4
     for angle in (truth.pitch_rad, truth.yaw_rad, truth.roll_rad):  # slow motion is really there
         assert np.ptp(angle) * deg > 0.05
@@ -239,7 +238,7 @@ def test_pitch_yaw_roll_ranges_and_vibration(scenario):
     # y1 (roll), read from the amplitude spectrum A(f) = 2 |sum x e^(-2 pi i f t)| / N (003 §1.5)
     t = (truth.gyro_time_tai_ns - START) / 1e9
     x = truth.w_B_gyro - truth.w_B_gyro.mean(axis=0)
-    amp = 2 * np.abs(np.exp(-2j * np.pi * 0.4 * t) @ x) / t.size / ARCSEC_RAD
+    amp = 2 * np.abs(np.exp(-2j * np.pi * 0.4 * t) @ x) / t.size / RAD_PER_ARCSEC
     np.testing.assert_allclose(amp[[1, 2, 0]], 2 * np.pi * 0.4 * 3.0, rtol=0.05)
 
 
@@ -259,7 +258,7 @@ def test_orbit_energy_constant_and_gnss_round_trip(scenario):
     assert np.all((np.mean(dv**2, axis=0) > lo * 1e-6) & (np.mean(dv**2, axis=0) < hi * 1e-6))
     # the orbit is the 830 km sun-synchronous one
     assert np.linalg.norm(truth.r_I, axis=-1) == pytest.approx(6378137.0 + 830e3, rel=1e-14)
-    assert 98.7 < truth.model.inc_rad / DEG_RAD < 98.8
+    assert 98.7 < truth.model.inc_rad / RAD_PER_DEG < 98.8
 
 
 def test_mounting_003():

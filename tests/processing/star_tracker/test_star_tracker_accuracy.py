@@ -14,7 +14,7 @@ import pytest
 
 from processing.attitude import rotations
 from processing.signal.spectral import fit_sinusoid
-from processing.simulate.seed003 import ARCSEC_RAD, simulate_seed003
+from processing.simulate.seed003 import simulate_seed003
 from processing.star_tracker.accuracy import (
     StarTrackerAccuracy,
     StarTrackerAccuracyError,
@@ -26,6 +26,7 @@ from processing.star_tracker.accuracy import (
     split_segments,
 )
 from processing.time.timescales import iso_to_tai_ns
+from processing.units import RAD_PER_ARCSEC
 
 START = int(iso_to_tai_ns("2009-12-01T10:00:00"))
 SEEDS = range(20)
@@ -137,7 +138,7 @@ def test_gyro_comparison_is_consistent_with_the_simulated_noise(runs):
         g = r.result.gyro
         assert g is not None
         np.testing.assert_allclose(g.noise_sigma_rad_s, r.gyro_noise_rad_s, rtol=0.03)
-        np.testing.assert_allclose(g.offset_rad_s, r.gyro_bias_B_rad_s, atol=0.05 * ARCSEC_RAD)
+        np.testing.assert_allclose(g.offset_rad_s, r.gyro_bias_B_rad_s, atol=0.05 * RAD_PER_ARCSEC)
         # smoothing residuals of 003 §1.4 hold the 0.4 Hz line: sqrt(noise^2 + A^2/2)
         np.testing.assert_allclose(g.smoothing_sigma_rad_s,
                                    np.sqrt(r.gyro_noise_rad_s**2 + r.line_amplitude_rad_s**2 / 2), rtol=0.03)
@@ -157,7 +158,7 @@ def test_rates_follow_the_true_body_rate(runs):
     slow = w_true - line.evaluate((sc.truth.st_time_tai_ns - START) / NS)
     err = r.result.w_B_rad_s - slow
     inner = slice(20, -20)  # the fit's derivative is noisiest at the segment ends
-    assert np.all(np.sqrt(np.mean(err[inner] ** 2, axis=0)) < 1.0 * ARCSEC_RAD)
+    assert np.all(np.sqrt(np.mean(err[inner] ** 2, axis=0)) < 1.0 * RAD_PER_ARCSEC)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -200,7 +201,7 @@ def test_mean_quaternion_ignores_signs_and_residual_mrps_are_small():
 
 def test_sensor_axis_residuals_are_exact_and_reduce_to_eq2_for_small_z():
     rng = np.random.default_rng(1)
-    theta = 10 * ARCSEC_RAD * rng.standard_normal((100, 3))
+    theta = 10 * RAD_PER_ARCSEC * rng.standard_normal((100, 3))
     z_fit = np.column_stack([np.zeros(100), np.zeros(100), np.linspace(-0.16, 0.16, 100)])  # ~+-36 deg
     z = rotations.quat_to_mrp(rotations.quat_multiply(rotations.mrp_to_quat(z_fit), rotations.rotvec_to_quat(theta)))
     np.testing.assert_allclose(sensor_axis_residuals(z, z_fit), theta, atol=1e-15)
@@ -232,7 +233,7 @@ def test_gap_free_data_use_the_dst_route_and_agree_with_the_general_route():
     assert [s.method for s in fast.segments] == ["dst"] and [s.method for s in dense.segments] == ["lstsq"]
     assert fast.harmonics == dense.harmonics
     np.testing.assert_allclose(fast.sigma_rad, dense.sigma_rad, rtol=1e-9)
-    np.testing.assert_allclose(fast.residuals_rad, dense.residuals_rad, atol=1e-10 * ARCSEC_RAD * 1e3)
+    np.testing.assert_allclose(fast.residuals_rad, dense.residuals_rad, atol=1e-10 * RAD_PER_ARCSEC * 1e3)
 
 
 def test_without_gyro_nothing_is_removed_but_the_alias_is_reported():

@@ -27,7 +27,6 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from processing.time.timescales import (
-    NS_PER_S,
     SCALES,
     TAI_MINUS_GPS_S,
     TT_MINUS_TAI_S,
@@ -44,6 +43,7 @@ from processing.time.timescales import (
     tai_ns_to_ut1_jd,
     utc_leap_second_dates,
 )
+from processing.units import NS_PER_S
 
 DAY_NS = 86_400 * NS_PER_S
 MICROSECOND_S = 1e-6

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from processing.frames.orbital import dcm_IO_003
-from processing.orbits.two_body import R_EARTH_M
+from processing.units import R_EARTH_M
 from processing.vector_attitude import antenna_axis as aa
 
 
