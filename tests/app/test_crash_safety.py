@@ -2,7 +2,8 @@
 
 After the cycles: every upload acknowledged with 201 is fully readable, no upload is partly visible,
 every catalogued file exists and reads, and no job stays queued or running. The number of cycles is
-ATTITUDE_CRASH_CYCLES (default 30 on SQLite, 10 on PostgreSQL, to keep CI within its budget).
+ATTITUDE_CRASH_CYCLES (default 12 on SQLite, 6 on PostgreSQL, to keep CI within its budget; set it higher
+for a soak run).
 """
 
 from __future__ import annotations
@@ -76,7 +77,7 @@ def rows_of(base, batch):
 
 
 def test_sigkill_during_uploads_and_jobs(tmp_path: Path, database_url: str):
-    cycles = int(os.environ.get("ATTITUDE_CRASH_CYCLES", "30" if database_url.startswith("sqlite") else "10"))
+    cycles = int(os.environ.get("ATTITUDE_CRASH_CYCLES", "12" if database_url.startswith("sqlite") else "6"))
     env = {"ATTITUDE_DATA_DIR": str(tmp_path / "data"), "ATTITUDE_DATABASE_URL": database_url,
            "ATTITUDE_BOOTSTRAP_TOKEN": TOKEN, "ATTITUDE_JOB_HEARTBEAT_TIMEOUT_S": "2", "ATTITUDE_MAX_JOBS": "2",
            "ATTITUDE_RATE_LIMIT_PER_MINUTE": "1000000"}
