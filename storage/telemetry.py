@@ -7,18 +7,16 @@ its ``telemetry_file`` rows in one transaction. ``read_window`` returns sorted, 
 
 from __future__ import annotations
 
-import hashlib
-import threading
-from collections import defaultdict
 from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
 import pyarrow as pa
-from sqlalchemy import select, text
+from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from processing.streams import TIME_COLUMN, StreamSpec
+from storage.locks import stream_lock
 from storage.models import Ingest, TelemetryFile
 from storage.parquet_store import ParquetStore
 
@@ -40,23 +38,6 @@ class IngestMeta:
     checksum_sha256: str
     time_scale: str
     api_key_id: str | None
-
-
-_locks: defaultdict[tuple[int, str], threading.Lock] = defaultdict(threading.Lock)
-_locks_guard = threading.Lock()
-
-
-def _stream_lock(spacecraft_id: int, stream: str) -> threading.Lock:
-    with _locks_guard:
-        return _locks[(spacecraft_id, stream)]
-
-
-def _lock_in_database(session: Session, spacecraft_id: int, stream: str) -> None:
-    """Serialise ingests of one stream across processes (PostgreSQL advisory lock)."""
-    if session.get_bind().dialect.name == "postgresql":
-        key = int.from_bytes(hashlib.sha256(f"{spacecraft_id}/{stream}".encode()).digest()[:8], "big",
-                             signed=True)
-        session.execute(text("SELECT pg_advisory_xact_lock(:k)"), {"k": key})
 
 
 def _files_in_window(session: Session, spacecraft_id: int, stream: str, start: int | None,
@@ -150,7 +131,6 @@ def ingest(session: Session, store: ParquetStore, spacecraft_id: int, spec: Stre
     """
     times = table.column(TIME_COLUMN).to_numpy()
     t0, t1 = int(times.min()), int(times.max())
-    _lock_in_database(session, spacecraft_id, spec.name)
     files = _files_in_window(session, spacecraft_id, spec.name, t0, t1)
     new_mask = np.ones(table.num_rows, dtype=bool)
     if files:
@@ -189,10 +169,10 @@ def commit_ingest(session: Session, store: ParquetStore, spacecraft_id: int, spe
                   table: pa.Table, row_index: np.ndarray, meta: IngestMeta) -> Ingest:
     """Run :func:`ingest` and commit; on any failure roll back and delete the files it wrote.
 
-    Ingests of one stream are serialised (a process-local lock plus, on PostgreSQL, an advisory
-    transaction lock) so that de-duplication sees every committed sample.
+    Ingests of one stream are serialised across threads, processes and instances
+    (:func:`storage.locks.stream_lock`) so that de-duplication sees every committed sample.
     """
-    with _stream_lock(spacecraft_id, spec.name):
+    with stream_lock(session, spacecraft_id, spec.name):
         try:
             record = ingest(session, store, spacecraft_id, spec, table, row_index, meta)
             session.commit()

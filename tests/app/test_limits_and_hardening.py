@@ -68,6 +68,21 @@ def test_gzip_uploads_and_bombs(limited, settings):
     assert r.status_code == 415
 
 
+def test_gzip_members_are_all_stored_and_trailing_bytes_refused(limited, settings):
+    # The red team's case: two gzip members answered 201 rows=1000 of 2000 (the second was dropped).
+    client = limited(max_upload_bytes=100_000)
+    head, rest = GYRO.split("\n", 1)
+    first, second = rest[: len(rest) // 2], rest[len(rest) // 2:]
+    two_members = gzip.compress((head + "\n" + first).encode()) + gzip.compress(second.encode())
+    r = upload(client, "gyro", two_members, {**CSV, "Content-Encoding": "gzip"})
+    assert r.status_code == 201 and r.json()["rows"] == 60 and r.json()["inserted"] == 60
+    for trailing in (b"\x00\x00", b"garbage", b"\x1f"):
+        r = upload(client, "gyro", gzip.compress(GYRO.encode()) + trailing, {**CSV, "Content-Encoding": "gzip"})
+        assert r.status_code == 422, trailing
+        assert "trailing" in r.json()["detail"] or "truncated" in r.json()["detail"]
+    assert len(stored_files(settings)) == 1  # only the first, whole upload
+
+
 def test_row_limit(limited):
     client = limited(max_upload_rows=10)
     r = upload(client, "gyro", GYRO)

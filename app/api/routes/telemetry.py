@@ -6,7 +6,6 @@ import datetime as dt
 import hashlib
 import io
 import re
-import zlib
 from dataclasses import replace
 from typing import Annotated, Any
 
@@ -26,6 +25,7 @@ from app.api.pagination import MAX_LIMIT, announce_next, paginate
 from app.api.routes.spacecraft import get_spacecraft, latest_config
 from app.ingest.errors import RowError, UploadError
 from app.ingest.formats import decoders
+from app.ingest.inflate import GzipBodyError, GzipInflater, InflatedTooLarge
 from app.ingest.parse import SUPPORTED_TYPES, UnsupportedMediaType, parse_body
 from app.ingest.validate import SensorPolicy, UploadOptions, validate
 from app.jobs.outputs import jsonable
@@ -91,8 +91,9 @@ def _ingest_out(rec: Ingest) -> IngestOut:
 async def read_limited(request: Request, limit: int) -> bytes:
     """The request body, refusing (413) more than ``limit`` bytes without reading it all.
 
-    ``Content-Encoding: gzip`` bodies are inflated as they arrive, and the inflated size is held to the
-    same limit, so a small "gzip bomb" is refused early; other encodings are 415.
+    ``Content-Encoding: gzip`` bodies are inflated as they arrive (every member; trailing bytes are a 422,
+    :mod:`app.ingest.inflate`), and the inflated size is held to the same limit, so a small "gzip bomb"
+    is refused early; other encodings are 415.
     """
     declared = request.headers.get("content-length")
     if declared is not None and declared.isdigit() and int(declared) > limit:
@@ -102,27 +103,23 @@ async def read_limited(request: Request, limit: int) -> bytes:
     if encoding not in ("identity", "gzip"):
         raise HTTPException(status.HTTP_415_UNSUPPORTED_MEDIA_TYPE,
                             f"Content-Encoding {encoding!r} is not supported; use gzip or none")
-    inflater = zlib.decompressobj(wbits=16 + zlib.MAX_WBITS) if encoding == "gzip" else None
+    inflater = GzipInflater(limit) if encoding == "gzip" else None
     chunks: list[bytes] = []
     size = 0
     try:
         async for chunk in request.stream():
             if inflater is not None:
-                chunk = inflater.decompress(chunk, limit - size + 1)
-                if inflater.unconsumed_tail:
-                    raise HTTPException(413,
-                                        f"inflated body exceeds the limit of {limit} bytes")
+                chunk = inflater.feed(chunk)
             size += len(chunk)
             if size > limit:
-                raise HTTPException(413,
-                                    f"body exceeds the limit of {limit} bytes")
+                raise HTTPException(413, f"body exceeds the limit of {limit} bytes")
             chunks.append(chunk)
         if inflater is not None:
-            if not inflater.eof:
-                raise HTTPException(422, "the gzip body is truncated")
-            chunks.append(inflater.flush())
-    except zlib.error as exc:
-        raise HTTPException(422, f"the body is not valid gzip: {exc}") from None
+            inflater.close()
+    except InflatedTooLarge as exc:
+        raise HTTPException(413, str(exc)) from None
+    except GzipBodyError as exc:
+        raise HTTPException(422, str(exc)) from None
     return b"".join(chunks)
 
 
