@@ -23,6 +23,7 @@ from app.settings import Settings
 from app.version import __version__
 from app.web import router as web_router
 from storage.db import make_engine, session_factory, upgrade
+from storage.errors import DamagedFileError, StorageFullError
 from storage.keys import ensure_bootstrap_key
 from storage.parquet_store import ParquetStore
 from storage.telemetry import referenced_paths
@@ -83,6 +84,22 @@ def create_app(settings: Settings | None = None) -> FastAPI:
                    "message": e.get("msg", "invalid")} for e in exc.errors()]
         return JSONResponse(status_code=422, content={"detail": "invalid request", "errors": errors,
                                                       "error_count": len(errors)})
+
+    @app.exception_handler(DamagedFileError)
+    async def _damaged(_: Request, exc: DamagedFileError) -> JSONResponse:
+        return JSONResponse(status_code=503, content={
+            "detail": str(exc), "file": exc.path, "ingest_id": exc.ingest_id, "stream": exc.stream,
+            "reason": exc.reason})
+
+    @app.exception_handler(StorageFullError)
+    async def _full(_: Request, exc: StorageFullError) -> JSONResponse:
+        return JSONResponse(status_code=507, content={"detail": str(exc)})
+
+    @app.exception_handler(Exception)
+    async def _internal(request: Request, exc: Exception) -> JSONResponse:  # every 5xx body is JSON
+        log.error("internal error on %s %s", request.method, request.url.path, exc_info=exc)
+        return JSONResponse(status_code=500, content={
+            "detail": f"internal error ({type(exc).__name__}); the server log has the details"})
 
     @app.get("/healthz", tags=["health"])
     def healthz(request: Request) -> dict[str, str]:

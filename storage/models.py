@@ -111,7 +111,7 @@ class Ingest(Base):
     created_at: Mapped[dt.datetime] = mapped_column(default=utcnow)
     api_key_id: Mapped[str | None] = mapped_column(String(32), nullable=True)
 
-    files: Mapped[list[TelemetryFile]] = relationship(back_populates="ingest")
+    files: Mapped[list[TelemetryFile]] = relationship(back_populates="ingest", cascade="all, delete-orphan")
 
 
 class TelemetryFile(Base):
@@ -132,6 +132,8 @@ class TelemetryFile(Base):
     t_min_tai_ns: Mapped[int] = mapped_column(BigInteger)
     t_max_tai_ns: Mapped[int] = mapped_column(BigInteger)
     sensors: Mapped[str] = mapped_column(String(200))
+    quarantined: Mapped[str | None] = mapped_column(Text, nullable=True)  # why it cannot be read; None: healthy
+    quarantined_at: Mapped[dt.datetime | None] = mapped_column(nullable=True)
 
     ingest: Mapped[Ingest] = relationship(back_populates="files")
 

@@ -16,6 +16,7 @@ catalog exactly as above — readers never list the store, they open the files t
 from __future__ import annotations
 
 import datetime as dt
+import errno
 import os
 import time
 import uuid
@@ -29,10 +30,12 @@ import pyarrow.parquet as pq
 
 from processing.streams import SENSOR_COLUMN, TIME_COLUMN
 from processing.units import NS_PER_DAY
+from storage.errors import DamagedFileError, StorageFullError
 from storage.fs import Location, resolve
 
 EPOCH_DATE = dt.date(1970, 1, 1)
 TMP_PREFIX = ".tmp-"
+NO_SPACE = (errno.ENOSPC, errno.EDQUOT)
 
 
 @dataclass(frozen=True)
@@ -88,8 +91,10 @@ class ParquetStore:
                     part = table.take(pa.array(order[lo:hi]))
                 day = EPOCH_DATE + dt.timedelta(days=int(day_i))
                 written.append(self._publish(spacecraft_id, stream, ingest_id, day, part))
-        except BaseException:
+        except BaseException as exc:
             self.remove(w.path for w in written)
+            if isinstance(exc, OSError) and exc.errno in NO_SPACE:
+                raise StorageFullError(f"the telemetry store is full ({exc.strerror}); nothing was stored") from exc
             raise
         return written
 
@@ -144,10 +149,16 @@ class ParquetStore:
             filters.append((TIME_COLUMN, ">=", start_tai_ns))
         if end_tai_ns is not None:
             filters.append((TIME_COLUMN, "<=", end_tai_ns))
-        if self.location.local:
-            return [pq.read_table(self.root / p, filters=filters or None) for p in paths]
-        return [pq.read_table(self.location.path(p), filesystem=self.location.fs, filters=filters or None)
-                for p in paths]
+        return [self._read_one(p, filters) for p in paths]
+
+    def _read_one(self, path: str, filters: list[tuple[str, str, int]]) -> pa.Table:
+        """One file; DamagedFileError naming it when it cannot be read (corrupt, truncated, missing)."""
+        try:
+            if self.location.local:
+                return pq.read_table(self.root / path, filters=filters or None)
+            return pq.read_table(self.location.path(path), filesystem=self.location.fs, filters=filters or None)
+        except (OSError, pa.ArrowException) as exc:
+            raise DamagedFileError(path, f"{type(exc).__name__}: {exc}") from exc
 
     def remove(self, paths: Iterable[str]) -> None:
         for p in paths:

@@ -7,18 +7,23 @@ its ``telemetry_file`` rows in one transaction. ``read_window`` returns sorted, 
 
 from __future__ import annotations
 
+import datetime as dt
+import logging
 from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
 import pyarrow as pa
-from sqlalchemy import select
+from sqlalchemy import select, update
 from sqlalchemy.orm import Session
 
 from processing.streams import TIME_COLUMN, StreamSpec
+from storage.errors import DamagedFileError
 from storage.locks import stream_lock
 from storage.models import Ingest, TelemetryFile
 from storage.parquet_store import ParquetStore
+
+log = logging.getLogger("attitude.storage")
 
 
 class ConflictError(Exception):
@@ -67,6 +72,68 @@ def _sort_unique(table: pa.Table, spec: StreamSpec) -> pa.Table:
     return table.filter(pa.array(keep))
 
 
+def _read_files(session: Session, store: ParquetStore, files: list[TelemetryFile], start_tai_ns: int | None,
+                end_tai_ns: int | None) -> list[pa.Table]:
+    """The non-empty tables of ``files`` in the window; DamagedFileError (the file quarantined, in a
+    transaction of its own) when one is quarantined or cannot be read."""
+    for f in files:
+        if f.quarantined:
+            raise DamagedFileError(f.path, f.quarantined, ingest_id=f.ingest_id, stream=f.stream)
+    tables = []
+    for f in files:
+        try:
+            (table,) = store.read([f.path], start_tai_ns, end_tai_ns)
+        except DamagedFileError as exc:
+            _quarantine(session, f, exc.reason)
+            raise DamagedFileError(f.path, exc.reason, ingest_id=f.ingest_id, stream=f.stream) from exc
+        if table.num_rows:
+            tables.append(table)
+    return tables
+
+
+def _quarantine(session: Session, f: TelemetryFile, reason: str) -> None:
+    log.error("quarantining damaged telemetry file %s (ingest %s, stream %s): %s", f.path, f.ingest_id, f.stream,
+              reason)
+    with Session(session.get_bind().engine) as other, other.begin():
+        other.execute(update(TelemetryFile).where(TelemetryFile.id == f.id, TelemetryFile.quarantined.is_(None))
+                      .values(quarantined=reason[:2000], quarantined_at=dt.datetime.now(dt.UTC)))
+
+
+def quarantined_files(session: Session, spacecraft_id: int | None = None) -> list[TelemetryFile]:
+    """Files found damaged, oldest first."""
+    q = select(TelemetryFile).where(TelemetryFile.quarantined.is_not(None))
+    if spacecraft_id is not None:
+        q = q.where(TelemetryFile.spacecraft_id == spacecraft_id)
+    return list(session.scalars(q.order_by(TelemetryFile.quarantined_at)))
+
+
+def restore_file(session: Session, store: ParquetStore, file_id: int) -> TelemetryFile:
+    """Lift the quarantine of a file that reads again (e.g. restored from a backup); DamagedFileError if not."""
+    f = session.get(TelemetryFile, file_id)
+    if f is None:
+        raise LookupError(f"no telemetry file {file_id}")
+    store.read([f.path])
+    f.quarantined, f.quarantined_at = None, None
+    session.flush()
+    return f
+
+
+def retract_ingest(session: Session, store: ParquetStore, ingest_id: str) -> list[str]:
+    """Delete an ingest and its files (a mistaken upload, or one whose file is damaged); commits.
+
+    The catalog rows go first (readers stop seeing the samples at the commit), then the files.
+    Returns the paths removed."""
+    record = session.get(Ingest, ingest_id)
+    if record is None:
+        raise LookupError(f"no ingest {ingest_id}")
+    paths = [f.path for f in record.files]
+    with stream_lock(session, record.spacecraft_id, record.stream):
+        session.delete(record)
+        session.commit()
+    store.remove(paths)
+    return paths
+
+
 def read_window(session: Session, store: ParquetStore, spacecraft_id: int, spec: StreamSpec,
                 start_tai_ns: int | None = None, end_tai_ns: int | None = None,
                 sensor: str | None = None) -> pa.Table:
@@ -74,7 +141,7 @@ def read_window(session: Session, store: ParquetStore, spacecraft_id: int, spec:
     files = _files_in_window(session, spacecraft_id, spec.name, start_tai_ns, end_tai_ns)
     if sensor is not None:
         files = [f for f in files if sensor in f.sensors.split(",")]
-    tables = [t for t in store.read([f.path for f in files], start_tai_ns, end_tai_ns) if t.num_rows]
+    tables = _read_files(session, store, files, start_tai_ns, end_tai_ns)
     if not tables:
         return empty_table(spec)
     table = pa.concat_tables(tables, promote_options="permissive")
@@ -134,7 +201,7 @@ def ingest(session: Session, store: ParquetStore, spacecraft_id: int, spec: Stre
     files = _files_in_window(session, spacecraft_id, spec.name, t0, t1)
     new_mask = np.ones(table.num_rows, dtype=bool)
     if files:
-        stored = [t for t in store.read([f.path for f in files], t0, t1) if t.num_rows]
+        stored = _read_files(session, store, files, t0, t1)
         if stored:
             existing = pa.concat_tables(stored, promote_options="permissive")
             new_mask, conflicts, n_conflicts = _split_new(existing, table, spec, row_index)

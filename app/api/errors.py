@@ -29,4 +29,4 @@ def error_responses(*codes: int) -> dict[int | str, dict[str, Any]]:
 
 
 # What any authenticated /api/v1 route may answer besides its own results.
-COMMON_ERRORS = error_responses(400, 401, 403, 404, 409, 413, 415, 422, 429)
+COMMON_ERRORS = error_responses(400, 401, 403, 404, 409, 413, 415, 422, 429, 500, 503, 507)
