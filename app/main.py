@@ -26,7 +26,7 @@ from storage.db import make_engine, session_factory, upgrade
 from storage.errors import DamagedFileError, StorageFullError
 from storage.keys import ensure_bootstrap_key
 from storage.parquet_store import ParquetStore
-from storage.telemetry import referenced_paths
+from storage.telemetry import sweep_orphans
 
 log = logging.getLogger("attitude")
 
@@ -45,7 +45,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         with sessions.begin() as session:
             if settings.bootstrap_token:
                 ensure_bootstrap_key(session, settings.bootstrap_token)
-            removed = store.remove_orphans(referenced_paths(session))
+        removed = sweep_orphans(sessions, store)
         if removed:
             log.warning("removed %d unreferenced telemetry files left by an interrupted ingest", len(removed))
         app.state.settings = settings

@@ -12,7 +12,7 @@ atomic publish). Object stores have no atomic rename, but a single PUT (or a com
 upload) makes an object visible whole or not at all; the stores write the complete file in one
 upload under its final name, and — as everywhere — readers open only files the catalog lists, and the
 catalog row is committed after the upload returned. A crash between the two leaves an unlisted object
-that :meth:`storage.parquet_store.ParquetStore.remove_orphans` deletes later.
+that :func:`storage.telemetry.sweep_orphans` deletes at the next start-up.
 """
 
 from __future__ import annotations

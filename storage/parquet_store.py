@@ -4,8 +4,8 @@ Layout: ``<root>/sc=<spacecraft id>/stream=<stream>/day=<YYYY-MM-DD>/<ingest id>
 per ingest and TAI day. A file is written under a hidden temporary name in its final directory,
 fsynced, renamed into place and the directory fsynced; only then does the caller commit the catalog
 row that makes it visible. Readers open only files the catalog lists, so a crash at any point leaves
-either an unreferenced file (removed by :meth:`ParquetStore.remove_orphans` at start-up) or a
-complete, referenced one.
+either an unreferenced file (removed at start-up by :func:`storage.telemetry.sweep_orphans`, under
+each stream's ingest lock) or a complete, referenced one.
 
 The root may also be a URL of any pyarrow/fsspec filesystem (``ATTITUDE_DATA_URL``, e.g.
 ``s3://bucket/prefix/telemetry``). Object stores have no atomic rename: each file is uploaded whole
@@ -166,6 +166,12 @@ class ParquetStore:
                 (self.root / p).unlink(missing_ok=True)
             else:
                 self.location.delete(p)
+
+    def parquet_files(self) -> list[str]:
+        """Every Parquet file in the store (published or temporary), relative to the root."""
+        if not self.location.local:
+            return [rel for rel, _ in self.location.list_files(".parquet")]
+        return [str(p.relative_to(self.root)) for p in self.root.rglob("*.parquet")]
 
     def remove_orphans(self, referenced: set[str], older_than_s: float = 600.0) -> list[str]:
         """Delete files the catalog does not reference (left by a crash before commit).

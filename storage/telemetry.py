@@ -9,13 +9,14 @@ from __future__ import annotations
 
 import datetime as dt
 import logging
+import re
 from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
 import pyarrow as pa
 from sqlalchemy import select, update
-from sqlalchemy.orm import Session
+from sqlalchemy.orm import Session, sessionmaker
 
 from processing.streams import TIME_COLUMN, StreamSpec
 from storage.errors import DamagedFileError
@@ -249,6 +250,33 @@ def commit_ingest(session: Session, store: ParquetStore, spacecraft_id: int, spe
             raise
         session.info.pop("written_files", None)
         return record
+
+
+_STREAM_DIR = re.compile(r"^sc=(\d+)/stream=([a-z_]+)/")
+
+
+def sweep_orphans(sessions: sessionmaker[Session], store: ParquetStore) -> list[str]:
+    """Remove every stored file the catalog does not list (left by a crash before its commit).
+
+    Each stream is swept holding its ingest lock (:func:`storage.locks.stream_lock`), so no ingest of it
+    is in flight in any process or instance: a file not listed then is an orphan, whatever its age.
+    Returns the removed paths."""
+    groups: dict[tuple[int, str], list[str]] = {}
+    for rel in store.parquet_files():
+        m = _STREAM_DIR.match(rel)
+        if m:
+            groups.setdefault((int(m.group(1)), m.group(2)), []).append(rel)
+    removed: list[str] = []
+    for (spacecraft_id, stream), paths in sorted(groups.items()):
+        with sessions() as session:
+            with stream_lock(session, spacecraft_id, stream):
+                listed = set(session.scalars(select(TelemetryFile.path).where(
+                    TelemetryFile.spacecraft_id == spacecraft_id, TelemetryFile.stream == stream)))
+                orphans = [p for p in paths if p not in listed]
+                store.remove(orphans)
+            session.commit()  # ends the transaction (and with it a PostgreSQL advisory lock)
+        removed += orphans
+    return removed
 
 
 def referenced_paths(session: Session) -> set[str]:

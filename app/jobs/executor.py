@@ -45,7 +45,8 @@ class LocalExecutor(CatalogDispatcher[_Running]):
         self._ctx.set_forkserver_preload(["app.jobs.worker", "app.jobs.preload"])
 
     def _launch(self, job_id: str) -> None:
-        proc = self._ctx.Process(target=worker.run, args=(job_id, self.settings), name=f"job-{job_id}", daemon=False)
+        proc = self._ctx.Process(target=worker.run, args=(job_id, self.settings, os.getpid()), name=f"job-{job_id}",
+                                 daemon=False)
         try:
             proc.start()
         except Exception as exc:  # noqa: BLE001

@@ -1,7 +1,9 @@
 """Crash safety of the real server: concurrent uploads and jobs, SIGKILL at random moments, restart.
 
-After the cycles: every upload acknowledged with 201 is fully readable, no upload is partly visible,
-every catalogued file exists and reads, and no job stays queued or running. The number of cycles is
+Each cycle SIGKILLs the service process alone (not its process group): its forkserver and job workers
+must die with it. After the cycles: every upload acknowledged with 201 is fully readable, no upload is
+partly visible, every catalogued file exists and reads, no unreferenced file is left on disk, and no job
+stays queued or running. The number of cycles is
 ATTITUDE_CRASH_CYCLES (default 12 on SQLite, 6 on PostgreSQL, to keep CI within its budget; set it higher
 for a soak run).
 """
@@ -62,6 +64,33 @@ def start(env, log):
         time.sleep(0.05)
 
 
+def descendants(pid: int) -> set[int]:
+    """Every live process below ``pid`` (from /proc)."""
+    children: dict[int, list[int]] = {}
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                ppid = int((entry / "stat").read_text().rsplit(")", 1)[1].split()[1])
+            except (OSError, IndexError, ValueError):
+                continue
+            children.setdefault(ppid, []).append(int(entry.name))
+    out: set[int] = set()
+    todo = [pid]
+    while todo:
+        for child in children.get(todo.pop(), []):
+            out.add(child)
+            todo.append(child)
+    return out
+
+
+def alive(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != "Z"
+
+
 def batch_csv(batch: int) -> bytes:
     t0 = 1_685_577_600 + batch * 1000  # distinct windows, 1000 s apart
     lines = [f"{t0 + 0.5 * i:.1f},{batch},{i},{i * 0.5}" for i in range(ROWS)]
@@ -109,7 +138,14 @@ def test_sigkill_during_uploads_and_jobs(tmp_path: Path, database_url: str):
                         with lock:
                             acknowledged.add(batch)
 
-            threads = [threading.Thread(target=uploader) for _ in range(3)]
+            def reader(stop: threading.Event = stop, base: str = base) -> None:
+                while not stop.is_set():
+                    try:
+                        request(base, "GET", "/api/v1/spacecraft/sat/telemetry/gyro?format=parquet")
+                    except (OSError, http.client.HTTPException):
+                        return
+
+            threads = [threading.Thread(target=uploader) for _ in range(3)] + [threading.Thread(target=reader)]
             for t in threads:
                 t.start()
             try:
@@ -119,8 +155,13 @@ def test_sigkill_during_uploads_and_jobs(tmp_path: Path, database_url: str):
             except (OSError, http.client.HTTPException):
                 pass
             time.sleep(rng.uniform(0.05, 1.0))
-            os.killpg(proc.pid, signal.SIGKILL)  # the service and its job workers die at once
+            below = descendants(proc.pid)  # the forkserver and any running job worker
+            os.kill(proc.pid, signal.SIGKILL)  # the service alone: its workers must follow it
             proc.wait()
+            deadline = time.monotonic() + 10
+            while (survivors := {p for p in below if alive(p)}) and time.monotonic() < deadline:
+                time.sleep(0.05)
+            assert not survivors, f"cycle {cycle}: processes outlived the service: {survivors}"
             stop.set()
             for t in threads:
                 t.join(30)
@@ -142,6 +183,9 @@ def test_sigkill_during_uploads_and_jobs(tmp_path: Path, database_url: str):
             engine.dispose()
             for p in paths:  # the catalog lists only complete, readable files
                 assert pq.read_metadata(tmp_path / "data" / "telemetry" / p).num_rows > 0
+            on_disk = {str(f.relative_to(tmp_path / "data" / "telemetry"))
+                       for f in (tmp_path / "data" / "telemetry").rglob("*.parquet")}
+            assert on_disk == set(paths), f"unreferenced files after the restart: {sorted(on_disk - set(paths))}"
             deadline = time.monotonic() + 30
             while True:  # interrupted jobs end (failed by their stopped heartbeat) or finish
                 status, body = request(base, "GET", "/api/v1/jobs?limit=500")
