@@ -11,6 +11,7 @@ from app.jobs.types.gyroless_ekf import JOB, Params
 from processing.attitude.rotations import quat_to_dcm
 from processing.gyroless.ekf import attitude_errors_rad
 from processing.simulate.seed004 import simulate_seed004
+from processing.spacecraft import Spacecraft
 from processing.tasks import TaskError, TaskInputs, no_progress
 from processing.time.timescales import iso_to_tai_ns
 
@@ -26,7 +27,7 @@ def scenario():  # noqa: ANN201
 
 def _inputs(sc, config=None, streams=None) -> TaskInputs:  # noqa: ANN001
     return TaskInputs(streams=streams if streams is not None else sc.streams,
-                      config=sc.config if config is None else config,
+                      spacecraft=Spacecraft.from_json(sc.config if config is None else config),
                       start_tai_ns=T0, end_tai_ns=T0 + int(DURATION_S * 1e9))
 
 
