@@ -106,3 +106,10 @@ def test_errors(scenario) -> None:  # noqa: ANN001
     with pytest.raises(TaskError, match="no sun_sensor samples"):
         JOB.run(_inputs(scenario, streams=streams), Params(), no_progress)
     assert JOB.name == "gyroless_ekf" and JOB.streams == ("magnetometer", "sun_sensor", "gnss")
+
+
+@pytest.mark.parametrize("sensor, name", [("magnetometer", "the magnetometer"), ("sun_sensor", "the sun sensor")])
+def test_a_missing_mounting_is_an_error_naming_the_sensor(scenario, sensor, name) -> None:  # noqa: ANN001
+    cfg = {k: v for k, v in scenario.config.items() if k != sensor}  # was: axes taken as body axes
+    with pytest.raises(TaskError, match=f"{name} is not in the spacecraft configuration .*add {sensor}.q_B"):
+        JOB.run(_inputs(scenario, config=cfg), Params(), no_progress)

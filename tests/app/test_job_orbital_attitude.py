@@ -189,3 +189,12 @@ def test_gracefo_c_ingests_and_flies_backwards_in_lvlh(client):
     assert np.all((off > 0.5) & (off < 1.0))  # the line-of-sight pitch offset only
     # The GNSS fit of the POD orbit: cm-level residuals.
     assert max(s["gnss_fit"]["position_residual_rms_m"]) < 0.05
+
+
+def test_a_star_tracker_without_mounting_is_an_error_naming_it():
+    inputs = _inputs(_scenario(0))
+    unmounted = TaskInputs(streams=inputs.streams, spacecraft=SpacecraftConfiguration(), start_tai_ns=START,
+                           end_tai_ns=START + 1200 * NS)  # was: the body frame taken as the tracker's
+    with pytest.raises(TaskError, match=r"star tracker 'st1' is not in the spacecraft configuration \(configured: "
+                                        r"none\)"):
+        JOB.run(unmounted, Params(write_aem=False), no_progress)

@@ -13,7 +13,7 @@ from processing.frames.earth_orientation import gcrs_to_itrs_state
 from processing.screening import criteria as scr
 from processing.screening.flags import accepted_mask, filter_streams, flags_table
 from processing.simulate.seed002 import simulate_seed002
-from processing.spacecraft import Spacecraft
+from processing.spacecraft import MissingMountingError, Spacecraft
 from tests.real_data import GNSS_NAV
 
 NAV = GNSS_NAV / "brdc2800.15n"
@@ -197,3 +197,19 @@ def test_sparse_gnss_is_not_flagged(step: int) -> None:
     rej = res.rejected("gnss")
     assert rej[bad].all()
     assert rej.sum() - bad.size <= max(1, 0.01 * t.size)
+
+
+def test_star_tracker_against_gyro_needs_its_mounting() -> None:
+    """The jump test against the gyro rotates the rates into the tracker frame: a tracker without a
+    configured mounting is an error naming it (it used to get an identity mounting silently)."""
+    t = np.arange(0, 20, 1.0)
+    st = {"time_tai_ns": (t * 1e9).astype(np.int64), "sensor": np.full(t.size, "st2", dtype=object),
+          "q0": np.ones(t.size), "q1": np.zeros(t.size), "q2": np.zeros(t.size), "q3": np.zeros(t.size)}
+    gyro = {"time_tai_ns": (t * 1e9).astype(np.int64), "sensor": np.full(t.size, "gyro", dtype=object),
+            "wx": np.zeros(t.size), "wy": np.zeros(t.size), "wz": np.zeros(t.size)}
+    config = Spacecraft.from_json({"star_trackers": {"st1": {"q_BS": [1, 0, 0, 0]}}})
+    with pytest.raises(MissingMountingError, match=r"star tracker 'st2' is not in the spacecraft configuration "
+                                                   r"\(configured: st1\)"):
+        scr.screen({"star_tracker": st, "gyro": gyro}, config)
+    without_gyro = scr.screen({"star_tracker": st}, config)  # against max_rate_rad_s: no mounting needed
+    assert without_gyro.n_rows == {"star_tracker": t.size}

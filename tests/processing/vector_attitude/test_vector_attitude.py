@@ -12,7 +12,7 @@ from processing.attitude import rotations
 from processing.formats.rinex_nav import parse_rinex_nav
 from processing.screening import criteria as screening
 from processing.simulate.seed002 import simulate_seed002
-from processing.spacecraft import Spacecraft
+from processing.spacecraft import MissingMountingError, Spacecraft
 from processing.vector_attitude import determination as va
 from tests.real_data import GNSS_NAV
 
@@ -163,3 +163,13 @@ def test_dipole_field_model_of_eq2() -> None:
     res = va.vector_attitude(obs_d, p)
     err, _ = va.attitude_errors(res, sc.truth.q_OB[::20])
     assert 0.5 < np.nanmedian(np.degrees(err)) < 20.0
+
+
+@pytest.mark.parametrize("key, sensor", [("magnetometer", "the magnetometer"),
+                                         ("gnss_antenna_axis_B", "the GNSS antenna axis")])
+def test_a_vector_without_its_mounting_is_an_error_naming_the_sensor(key: str, sensor: str) -> None:
+    """No identity q_BM and no [1, 0, 0] antenna axis when the configuration lacks them."""
+    sc, _ = scenario(2, 1800.0)
+    config = Spacecraft.from_json({k: v for k, v in sc.config.items() if k != key})
+    with pytest.raises(MissingMountingError, match=f"{sensor} is not in the spacecraft configuration"):
+        va.observations(sc.streams, config, SCENARIO_PARAMS, nav=nav())
