@@ -16,6 +16,7 @@ import numpy as np
 
 from app.jobs.types.alignment_calibration import JOB
 from processing.simulate.seed000 import simulate_seed000
+from processing.spacecraft import Spacecraft
 from processing.tasks import TaskInputs
 from processing.units import NS_PER_S, RAD_PER_ARCSEC
 
@@ -34,7 +35,7 @@ def main() -> None:
     t_sim = time.perf_counter() - t
     n_gyro = scenario.streams["gyro_increments"]["time_tai_ns"].size
     n_st = scenario.streams["star_tracker"]["time_tai_ns"].size
-    inputs = TaskInputs(streams=scenario.streams, config=scenario.config, start_tai_ns=start,
+    inputs = TaskInputs(streams=scenario.streams, spacecraft=Spacecraft.from_json(scenario.config), start_tai_ns=start,
                         end_tai_ns=start + int(args.duration_s * NS_PER_S))
     params = JOB.params()
     times = []

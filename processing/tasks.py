@@ -1,25 +1,49 @@
 """The contract between the job runner and the pure algorithms.
 
-A job task receives the telemetry of its window as plain column arrays and the spacecraft
-configuration, and returns a JSON-able summary plus named tables. It does no I/O; the runner (app/)
-loads the inputs, stores the outputs and draws the figures.
+A job task receives the telemetry of its window (column arrays, with typed per-sensor views from
+processing.samples) and the spacecraft configuration (processing.spacecraft.Spacecraft), and returns a
+JSON-able summary plus named tables. It does no I/O; the runner (app/) loads the inputs, stores the
+outputs and draws the figures.
+
+Errors: :class:`TaskError` (and its subclasses, e.g. processing.spacecraft.MissingMountingError) is the
+deliberate input error -- the job fails with its message. Any other exception, a ValueError included,
+is treated by the runner as an internal error (logged with its traceback).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
 
+from processing.samples import (
+    GnssSamples,
+    GnssVisibilitySamples,
+    GyroIncrementSamples,
+    GyroSamples,
+    MagnetometerSamples,
+    MagnetorquerSamples,
+    PanelCurrentSamples,
+    Samples,
+    StarTrackerSamples,
+    SunSensorSamples,
+)
+
+if TYPE_CHECKING:  # processing.spacecraft imports TaskError from here
+    from processing.spacecraft import Spacecraft
+
 Columns = Mapping[str, NDArray[Any]]
 Progress = Callable[[float, str], None]
+V = TypeVar("V", bound=Samples)
 
 
 class TaskError(ValueError):
-    """The inputs or parameters do not allow the computation; the message says what and why."""
+    """The inputs or parameters do not allow the computation; the message says what and why.
+
+    The one deliberate input error: the runner records its message as the job's failure reason."""
 
 
 def no_progress(fraction: float, stage: str) -> None:
@@ -53,13 +77,17 @@ class TaskInputs:
 
     ``streams[name]`` maps column names to 1-D arrays of equal length: ``time_tai_ns`` (int64 ns since
     1970-01-01 TAI), ``sensor`` (str) and the canonical columns of processing.streams, sorted by
-    (sensor, time). A stream without samples in the window is absent. ``config`` is the spacecraft
-    configuration (DESIGN.md JSON shape) of the version the job was submitted with. ``reference``
-    maps a reference kind (e.g. "eop_finals2000a") to the data set chosen at submission.
+    (sensor, time). A stream without samples in the window is absent. ``spacecraft`` is the spacecraft
+    configuration of the version the job was submitted with. ``reference`` maps a reference kind (e.g.
+    "eop_finals2000a") to the data set chosen at submission.
+
+    Typed views (processing.samples), one sensor in time order: ``star_tracker(sensor)``, ``gyro()``,
+    ``gnss()``, ...; ``sensor=None`` means the only sensor of that stream in the window (TaskError when
+    there are none or several). ``sensors(name)`` lists the sensors with samples.
     """
 
     streams: Mapping[str, Columns]
-    config: Mapping[str, Any]
+    spacecraft: Spacecraft
     start_tai_ns: int
     end_tai_ns: int
     reference: Mapping[str, ReferenceData] = field(default_factory=dict)
@@ -76,6 +104,51 @@ class TaskInputs:
             present = ", ".join(sorted(set(np.asarray(cols["sensor"]).tolist())))
             raise TaskError(f"no {name} samples of sensor {sensor!r} in the window (present: {present})")
         return {k: np.asarray(v)[mask] for k, v in cols.items()}
+
+    def sensors(self, name: str) -> tuple[str, ...]:
+        """Sensors of stream ``name`` with samples in the window, sorted (empty when none)."""
+        cols = self.streams.get(name)
+        if cols is None or len(cols["time_tai_ns"]) == 0:
+            return ()
+        return tuple(sorted(set(np.asarray(cols["sensor"]).astype(str).tolist())))
+
+    def _view(self, view: type[V], sensor: str | None) -> V:
+        name = view.STREAM
+        if sensor is None:
+            present = self.sensors(name)
+            if not present:
+                raise TaskError(f"no {name} samples in the job window")
+            if len(present) > 1:
+                raise TaskError(f"several {name} sensors in the window ({', '.join(present)}): name the one to use")
+            sensor = present[0]
+        return view.from_columns(sensor, self.stream(name, sensor))
+
+    def star_tracker(self, sensor: str | None = None) -> StarTrackerSamples:
+        return self._view(StarTrackerSamples, sensor)
+
+    def gyro(self, sensor: str | None = None) -> GyroSamples:
+        return self._view(GyroSamples, sensor)
+
+    def gyro_increments(self, sensor: str | None = None) -> GyroIncrementSamples:
+        return self._view(GyroIncrementSamples, sensor)
+
+    def gnss(self, sensor: str | None = None) -> GnssSamples:
+        return self._view(GnssSamples, sensor)
+
+    def magnetometer(self, sensor: str | None = None) -> MagnetometerSamples:
+        return self._view(MagnetometerSamples, sensor)
+
+    def sun_sensor(self, sensor: str | None = None) -> SunSensorSamples:
+        return self._view(SunSensorSamples, sensor)
+
+    def panel_currents(self, sensor: str | None = None) -> PanelCurrentSamples:
+        return self._view(PanelCurrentSamples, sensor)
+
+    def gnss_visibility(self, sensor: str | None = None) -> GnssVisibilitySamples:
+        return self._view(GnssVisibilitySamples, sensor)
+
+    def magnetorquer(self, sensor: str | None = None) -> MagnetorquerSamples:
+        return self._view(MagnetorquerSamples, sensor)
 
 
 @dataclass(frozen=True)

@@ -2,7 +2,9 @@
 
 Runs in a worker process (local executor) or on a Dask worker; talks to the catalog and the stores
 only through ``Settings``. Every outcome ends in a final state: succeeded, failed (with the reason)
-or cancelled.
+or cancelled. A deliberate input error (processing.tasks.TaskError) fails the job with its message;
+any other exception is an internal error, logged with its traceback and recorded as
+"internal error: <type>: <message>".
 """
 
 from __future__ import annotations
@@ -14,14 +16,17 @@ from typing import Any
 
 import numpy as np
 import pyarrow.parquet as pq
+from pydantic import ValidationError
 from sqlalchemy import select
 from sqlalchemy.orm import Session, sessionmaker
 
+from app.jobs.inputs import spacecraft_from_stored
 from app.jobs.outputs import jsonable, write_outputs
 from app.jobs.registry import JobType, registry
 from app.reports.inputs import describe_inputs
 from app.settings import Settings
 from processing.screening.flags import filter_streams
+from processing.spacecraft import IDENTITY_QUATERNION, Spacecraft
 from processing.streams import STREAMS
 from processing.tasks import ReferenceData, TaskError, TaskInputs
 from storage import jobs as jobstore
@@ -70,8 +75,9 @@ def load_inputs(session: Session, settings: Settings, job: Job,
                 job_type: JobType) -> tuple[TaskInputs, list[str]]:
     """The task's inputs and notes on what was done to them (calibration applied)."""
     store = ParquetStore(settings.telemetry_url)
-    config = session.scalar(select(SpacecraftConfig.config).where(
-        SpacecraftConfig.spacecraft_id == job.spacecraft_id, SpacecraftConfig.version == job.config_version))
+    spacecraft = spacecraft_from_stored(session.scalar(select(SpacecraftConfig.config).where(
+        SpacecraftConfig.spacecraft_id == job.spacecraft_id, SpacecraftConfig.version == job.config_version)),
+        job.config_version)
     streams: dict[str, dict[str, np.ndarray]] = {}
     for name in stream_names(job_type):
         table = read_window(session, store, job.spacecraft_id, STREAMS[name], job.start_tai_ns, job.end_tai_ns)
@@ -88,8 +94,8 @@ def load_inputs(session: Session, settings: Settings, job: Job,
         streams = _apply_screening(session, settings, screening_id, streams)
         screening_note = [f"only samples accepted by data_screening job {screening_id} were used"]
     if job_type.applies_calibration:
-        streams, config, notes = _apply_calibration(session, job, job_type.applies_calibration, streams,
-                                                    dict(config or {}))
+        streams, spacecraft, notes = _apply_calibration(session, job, job_type.applies_calibration, streams,
+                                                        spacecraft)
     else:
         notes = []
     notes = screening_note + notes
@@ -103,7 +109,7 @@ def load_inputs(session: Session, settings: Settings, job: Job,
             raise TaskError(f"reference data set {dataset_id} ({kind}) chosen for this job no longer exists")
         reference[kind] = ReferenceData(id=dataset.id, name=dataset.name, columns=references.columns(dataset),
                                         details=dataset.details)
-    return TaskInputs(streams=streams, config=config or {}, start_tai_ns=job.start_tai_ns,
+    return TaskInputs(streams=streams, spacecraft=spacecraft, start_tai_ns=job.start_tai_ns,
                       end_tai_ns=job.end_tai_ns, reference=reference), notes
 
 
@@ -124,14 +130,14 @@ def _apply_screening(session: Session, settings: Settings, screening_job_id: str
 
 
 def _apply_calibration(session: Session, job: Job, kind: str, streams: dict[str, dict[str, np.ndarray]],
-                       config: dict[str, Any]) -> tuple[dict[str, dict[str, np.ndarray]], dict[str, Any], list[str]]:
+                       spacecraft: Spacecraft) -> tuple[dict[str, dict[str, np.ndarray]], Spacecraft, list[str]]:
     """Apply the calibration version pinned at submission to the gyro streams (000, eq. 2).
 
-    The calibrated data are in the body frame, so the configuration handed to the task gets an
-    identity gyro mounting."""
+    The calibrated data are in the body frame, so the task gets a configuration with an identity gyro
+    mounting (a new frozen Spacecraft; the stored one is unchanged)."""
     cal_id = (job.reference or {}).get(CALIBRATION_PREFIX + kind)
     if cal_id is None or kind != "gyro":
-        return streams, config, []
+        return streams, spacecraft, []
     cal = session.get(Calibration, cal_id)
     if cal is None:
         raise TaskError(f"the {kind} calibration {cal_id} chosen for this job no longer exists")
@@ -149,9 +155,9 @@ def _apply_calibration(session: Session, job: Job, kind: str, streams: dict[str,
                                    interval_s=data[interval] if interval else None)
         data.update({c: np.ascontiguousarray(y[:, i]) for i, c in enumerate(cols)})
         streams[name] = data
-    config["gyro"] = {**config.get("gyro", {}), "q_BG": [1.0, 0.0, 0.0, 0.0]}
-    return streams, config, [f"gyro data corrected with calibration version {cal.version} (id {cal.id}, from job "
-                             f"{cal.job_id}): mounting, scale factor and drift; gyro rates are in the body frame"]
+    note = (f"gyro data corrected with calibration version {cal.version} (id {cal.id}, from job {cal.job_id}): "
+            "mounting, scale factor and drift; gyro rates are in the body frame")
+    return streams, spacecraft.with_gyro_mounting(IDENTITY_QUATERNION), [note]
 
 
 def input_counts(inputs: TaskInputs) -> dict[str, dict[str, int]]:
@@ -186,7 +192,10 @@ def _execute(job_id: str, settings: Settings, sessions: sessionmaker[Session], a
             if job is None or job.status != "running":
                 return job.status if job else "missing"
             job_type = registry()[job.type]
-            params = job_type.params.model_validate(job.params)
+            try:
+                params = job_type.params.model_validate(job.params)
+            except ValidationError as exc:  # valid at submission; a software update may have changed the model
+                raise TaskError(str(exc)) from exc
             progress(0.01, "loading telemetry")
             inputs, input_notes = load_inputs(session, settings, job, job_type)
             spacecraft_id = job.spacecraft_id
@@ -218,11 +227,11 @@ def _execute(job_id: str, settings: Settings, sessions: sessionmaker[Session], a
         artifacts.remove_job(job_id)
         _finish(sessions, job_id, "cancelled", stage="cancelled")
         return "cancelled"
-    except (TaskError, ValueError) as exc:
+    except TaskError as exc:  # a deliberate input error: its message is the reason
         artifacts.remove_job(job_id)
         _finish(sessions, job_id, "failed", stage="failed", error=str(exc) or type(exc).__name__)
         return "failed"
-    except Exception as exc:  # noqa: BLE001 - every failure must end the job with a reason
+    except Exception as exc:  # noqa: BLE001 - anything else (a ValueError too) is a bug: logged with traceback
         log.error("job %s crashed:\n%s", job_id, traceback.format_exc())
         artifacts.remove_job(job_id)
         _finish(sessions, job_id, "failed", stage="failed", error=f"internal error: {type(exc).__name__}: {exc}")

@@ -10,6 +10,7 @@ from pydantic import ValidationError
 from app.jobs.types.alignment_calibration import JOB, Params
 from processing.attitude import rotations
 from processing.simulate.seed000 import simulate_seed000
+from processing.spacecraft import Spacecraft
 from processing.tasks import TaskError, TaskInputs, TaskResult, no_progress
 from processing.time.timescales import iso_to_tai_ns
 from processing.units import RAD_PER_ARCSEC
@@ -25,7 +26,8 @@ def scenario():
 
 
 def _inputs(streams, config):
-    return TaskInputs(streams=streams, config=config, start_tai_ns=START, end_tai_ns=START + int(DURATION_S) * NS)
+    return TaskInputs(streams=streams, spacecraft=Spacecraft.from_json(config), start_tai_ns=START,
+                      end_tai_ns=START + int(DURATION_S) * NS)
 
 
 @pytest.fixture(scope="module")

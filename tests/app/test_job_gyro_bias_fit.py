@@ -14,6 +14,7 @@ from pydantic import ValidationError
 from app.jobs.types.gyro_bias_fit import JOB
 from processing.attitude import rotations as rot
 from processing.simulate.seed003 import Scenario003, simulate_seed003
+from processing.spacecraft import Spacecraft
 from processing.tasks import TaskError, TaskInputs, TaskResult, no_progress
 from processing.units import RAD_PER_ARCSEC
 from tests.app.helpers import assert_json_plain
@@ -28,7 +29,7 @@ def scenario(seed: int = 2, **kwargs: Any) -> Scenario003:
 def inputs(sc: Scenario003, streams: dict[str, Any] | None = None, config: dict[str, Any] | None = None) -> TaskInputs:
     return TaskInputs(
         streams=sc.streams if streams is None else streams,
-        config=sc.config if config is None else config,
+        spacecraft=Spacecraft.from_json(sc.config if config is None else config),
         start_tai_ns=T0_NS,
         end_tai_ns=T0_NS + 1200 * 1_000_000_000,
     )

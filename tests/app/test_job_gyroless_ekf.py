@@ -11,6 +11,7 @@ from app.jobs.types.gyroless_ekf import JOB, Params
 from processing.attitude.rotations import quat_to_dcm
 from processing.gyroless.ekf import attitude_errors_rad
 from processing.simulate.seed004 import simulate_seed004
+from processing.spacecraft import Spacecraft
 from processing.tasks import TaskError, TaskInputs, no_progress
 from processing.time.timescales import iso_to_tai_ns
 
@@ -26,7 +27,7 @@ def scenario():  # noqa: ANN201
 
 def _inputs(sc, config=None, streams=None) -> TaskInputs:  # noqa: ANN001
     return TaskInputs(streams=streams if streams is not None else sc.streams,
-                      config=sc.config if config is None else config,
+                      spacecraft=Spacecraft.from_json(sc.config if config is None else config),
                       start_tai_ns=T0, end_tai_ns=T0 + int(DURATION_S * 1e9))
 
 
@@ -105,3 +106,10 @@ def test_errors(scenario) -> None:  # noqa: ANN001
     with pytest.raises(TaskError, match="no sun_sensor samples"):
         JOB.run(_inputs(scenario, streams=streams), Params(), no_progress)
     assert JOB.name == "gyroless_ekf" and JOB.streams == ("magnetometer", "sun_sensor", "gnss")
+
+
+@pytest.mark.parametrize("sensor, name", [("magnetometer", "the magnetometer"), ("sun_sensor", "the sun sensor")])
+def test_a_missing_mounting_is_an_error_naming_the_sensor(scenario, sensor, name) -> None:  # noqa: ANN001
+    cfg = {k: v for k, v in scenario.config.items() if k != sensor}  # was: axes taken as body axes
+    with pytest.raises(TaskError, match=f"{name} is not in the spacecraft configuration .*add {sensor}.q_B"):
+        JOB.run(_inputs(scenario, config=cfg), Params(), no_progress)

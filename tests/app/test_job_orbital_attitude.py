@@ -13,6 +13,7 @@ from processing.formats.ccsds_adm import parse_aem
 from processing.frames.earth_orientation import gcrs_to_mod_mat
 from processing.frames.eop import parse_finals2000a
 from processing.simulate.seed003 import simulate_seed003
+from processing.spacecraft import Spacecraft as SpacecraftConfiguration
 from processing.streams import STREAMS
 from processing.tasks import ReferenceData, TaskError, TaskInputs, no_progress
 from processing.time import timescales
@@ -34,8 +35,8 @@ def _scenario(seed: int):
 
 def _inputs(sc, reference=None) -> TaskInputs:
     streams = {k: sc.streams[k] for k in ("star_tracker", "gnss")}
-    return TaskInputs(streams=streams, config=sc.config, start_tai_ns=START, end_tai_ns=START + 1200 * NS,
-                      reference=reference or {})
+    return TaskInputs(streams=streams, spacecraft=SpacecraftConfiguration.from_json(sc.config), start_tai_ns=START,
+                      end_tai_ns=START + 1200 * NS, reference=reference or {})
 
 
 def _rms_errors_arcsec(result, sc) -> np.ndarray:
@@ -161,7 +162,8 @@ def _stored_inputs(client, name: str) -> TaskInputs:
             table = read_window(session, state.store, sc.id, STREAMS[stream])
             streams[stream] = {c: table.column(c).to_numpy(zero_copy_only=False) for c in table.column_names}
     t = streams["star_tracker"]["time_tai_ns"]
-    return TaskInputs(streams=streams, config={"star_trackers": {"sca": {"q_BS": [1.0, 0.0, 0.0, 0.0]}}},
+    config = {"star_trackers": {"sca": {"q_BS": [1.0, 0.0, 0.0, 0.0]}}}
+    return TaskInputs(streams=streams, spacecraft=SpacecraftConfiguration.from_json(config),
                       start_tai_ns=int(t[0]), end_tai_ns=int(t[-1]))
 
 
@@ -187,3 +189,12 @@ def test_gracefo_c_ingests_and_flies_backwards_in_lvlh(client):
     assert np.all((off > 0.5) & (off < 1.0))  # the line-of-sight pitch offset only
     # The GNSS fit of the POD orbit: cm-level residuals.
     assert max(s["gnss_fit"]["position_residual_rms_m"]) < 0.05
+
+
+def test_a_star_tracker_without_mounting_is_an_error_naming_it():
+    inputs = _inputs(_scenario(0))
+    unmounted = TaskInputs(streams=inputs.streams, spacecraft=SpacecraftConfiguration(), start_tai_ns=START,
+                           end_tai_ns=START + 1200 * NS)  # was: the body frame taken as the tracker's
+    with pytest.raises(TaskError, match=r"star tracker 'st1' is not in the spacecraft configuration \(configured: "
+                                        r"none\)"):
+        JOB.run(unmounted, Params(write_aem=False), no_progress)

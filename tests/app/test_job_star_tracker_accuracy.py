@@ -13,6 +13,7 @@ from pydantic import ValidationError
 
 from app.jobs.types.star_tracker_accuracy import JOB
 from processing.simulate.seed003 import Scenario003, simulate_seed003
+from processing.spacecraft import Spacecraft
 from processing.tasks import TaskError, TaskInputs, TaskResult, no_progress
 from tests.app.helpers import assert_json_plain
 
@@ -27,7 +28,7 @@ def scenario(seed: int = 4, **kwargs: Any) -> Scenario003:
 def inputs(sc: Scenario003, streams: dict[str, Any] | None = None, config: dict[str, Any] | None = None) -> TaskInputs:
     return TaskInputs(
         streams=sc.streams if streams is None else streams,
-        config=sc.config if config is None else config,
+        spacecraft=Spacecraft.from_json(sc.config if config is None else config),
         start_tai_ns=T0_NS,
         end_tai_ns=T0_NS + 1200 * NS,
     )
@@ -133,7 +134,8 @@ def test_sensor_choice_and_errors():
     chosen = JOB.run(inputs(sc, streams={"star_tracker": two}, config=config), JOB.params(sensor="st2"),
                      no_progress)
     assert chosen.summary["sensor"] == "st2"
-    with pytest.raises(TaskError, match="no mounting q_BS configured for star tracker 'st9'"):
+    with pytest.raises(TaskError,
+                       match=r"star tracker 'st9' is not in the spacecraft configuration \(configured: st1\)"):
         JOB.run(inputs(sc), JOB.params(sensor="st9"), no_progress)
     with pytest.raises(TaskError, match="no star_tracker samples of sensor 'st1'"):
         JOB.run(inputs(sc, streams={"star_tracker": {**two, "sensor": np.full(two["sensor"].size, "st2", object)}},

@@ -15,6 +15,7 @@ from app.jobs.types.vector_attitude import JOB, Params
 from processing.attitude import rotations
 from processing.formats.rinex_nav import parse_rinex_nav_reference
 from processing.simulate.seed002 import simulate_seed002
+from processing.spacecraft import Spacecraft
 from processing.tasks import ReferenceData, TaskError, TaskInputs, no_progress
 from tests.real_data import GNSS_NAV
 
@@ -35,7 +36,7 @@ def scenario():
 def _inputs(streams=None, with_nav: bool = True) -> TaskInputs:
     sc = scenario()
     t = sc.truth.time_tai_ns
-    return TaskInputs(streams=sc.streams if streams is None else streams, config=sc.config,
+    return TaskInputs(streams=sc.streams if streams is None else streams, spacecraft=Spacecraft.from_json(sc.config),
                       start_tai_ns=int(t[0]), end_tai_ns=int(t[-1]),
                       reference={"rinex_nav": nav_reference()} if with_nav else {})
 

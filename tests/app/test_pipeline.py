@@ -15,6 +15,7 @@ from app.jobs.registry import JobType
 from app.jobs.types import reconstruction
 from processing.attitude import rotations
 from processing.simulate.seed003 import simulate_seed003
+from processing.spacecraft import Spacecraft
 from processing.tasks import TaskError, TaskInputs, TaskResult
 from processing.time import timescales
 
@@ -26,14 +27,14 @@ class NoParams(BaseModel):
 
 
 def fake_screening(inputs: TaskInputs, params: NoParams, progress) -> TaskResult:
-    """Rejects every 10th star-tracker sample (a 'flags' table, as data_screening's artifact)."""
+    """Rejects every 10th star-tracker sample (a 'flags' table shaped as data_screening's artifact)."""
     st = inputs.stream("star_tracker")
     n = len(st["time_tai_ns"])
     rejected = np.arange(n) % 10 == 0
     progress(0.5, "flagging")
     return TaskResult(summary={"star_tracker": {"n_total": n, "n_rejected": int(rejected.sum())}},
                       tables={"flags": {"time_tai_ns": st["time_tai_ns"], "stream": np.full(n, "star_tracker"),
-                                        "sensor": st["sensor"], "rejected": rejected}})
+                                        "sensor": st["sensor"], "key": np.full(n, ""), "accepted": ~rejected}})
 
 
 def fake_orbital(inputs: TaskInputs, params: NoParams, progress) -> TaskResult:
@@ -72,7 +73,7 @@ def scenario():
 
 @pytest.fixture
 def inputs(scenario):
-    return TaskInputs(streams=scenario.streams, config=scenario.config, start_tai_ns=START,
+    return TaskInputs(streams=scenario.streams, spacecraft=Spacecraft.from_json(scenario.config), start_tai_ns=START,
                       end_tai_ns=START + 600 * 10**9)
 
 
@@ -106,7 +107,7 @@ def test_pipeline_runs_the_registered_stages_and_passes_data_along(stages, input
     assert result.summary["stages"]["orbital_attitude"]["summary"]["n_star_tracker"] == n_st - n_rejected
     screened, _ = reconstruction.apply_screening(inputs.streams, stages["data_screening"].run(inputs, NoParams(),
                                                                                              lambda f, s: None))
-    screened_inputs = TaskInputs(streams=screened, config=inputs.config, start_tai_ns=inputs.start_tai_ns,
+    screened_inputs = TaskInputs(streams=screened, spacecraft=inputs.spacecraft, start_tai_ns=inputs.start_tai_ns,
                                  end_tai_ns=inputs.end_tai_ns)
     if "star_tracker_accuracy" in stages:  # the stage's summary is the stand-alone job's on the screened data
         jt = stages["star_tracker_accuracy"]
@@ -116,7 +117,7 @@ def test_pipeline_runs_the_registered_stages_and_passes_data_along(stages, input
     seen_mean = np.array(result.summary["stages"]["orbital_attitude"]["summary"]["mean_rate_rad_s"])
     if "gyro_bias_fit" in stages:  # calibration: orbital attitude got the rates without the fitted bias
         bias_B = np.array(result.summary["calibrations"]["gyro_bias_rad_s"])
-        q_BG = np.asarray(inputs.config["gyro"]["q_BG"], dtype=float)
+        q_BG = inputs.spacecraft.gyro_mounting()
         bias_G = rotations.quat_rotate(rotations.quat_conjugate(q_BG), bias_B)
         np.testing.assert_allclose(seen_mean, raw_mean - bias_G, rtol=0, atol=1e-15)
         assert np.linalg.norm(bias_B) > 0
@@ -138,7 +139,7 @@ def test_stage_selection_failure_and_continue(stages, inputs, monkeypatch):
                                                            "reason": "no magnetometer samples in the window"}
     mag = dict(inputs.streams, magnetometer={"time_tai_ns": np.array([START]), "sensor": np.array(["magnetometer"]),
                                              **{c: np.zeros(1) for c in ("bx", "by", "bz")}})
-    with_gnss = TaskInputs(streams=mag, config=inputs.config, start_tai_ns=START, end_tai_ns=START + 10**12)
+    with_gnss = TaskInputs(streams=mag, spacecraft=inputs.spacecraft, start_tai_ns=START, end_tai_ns=START + 10**12)
     with pytest.raises(TaskError, match="pipeline stage orbital_attitude failed: no orbit in the window"):
         reconstruction.run(with_gnss, reconstruction.Params(stages=["data_screening", "orbital_attitude"]),
                            lambda f, s: None)

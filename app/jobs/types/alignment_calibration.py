@@ -17,6 +17,7 @@ calibration version the service should store for the spacecraft's gyro. Figures 
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any, Literal
 
 import numpy as np
@@ -96,21 +97,13 @@ def _floats(x: Any) -> list[float | None]:
     return [float(v) if np.isfinite(v) else None for v in np.asarray(x, dtype=np.float64).reshape(-1)]
 
 
-def _quat(entry: Any, key: str, what: str) -> NDArray[np.float64]:
-    try:
-        q = np.asarray(entry[key], dtype=np.float64)
-    except (KeyError, TypeError, ValueError):
-        raise TaskError(f"spacecraft configuration has no valid {what}.{key}") from None
-    if q.shape != (4,) or not np.all(np.isfinite(q)) or np.linalg.norm(q) < 1e-12:
-        raise TaskError(f"{what}.{key} must be 4 finite numbers (scalar first), got {entry[key]!r}")
-    return rotations.quat_normalize(q)
-
-
 def _star_tracker(inputs: TaskInputs, params: Params) -> tuple[str, NDArray[np.float64], NDArray[np.int64],
                                                                NDArray[np.float64]]:
-    configured = dict(inputs.config.get("star_trackers") or {})
-    st = inputs.stream("star_tracker")
-    present = sorted(set(np.asarray(st["sensor"]).astype(str).tolist()))
+    spacecraft = inputs.spacecraft
+    configured = spacecraft.star_tracker_names
+    present = list(inputs.sensors("star_tracker"))
+    if not present:
+        raise TaskError("no star_tracker samples in the job window")
     if params.sensor is None:
         names = [n for n in configured if n in present]
         if len(names) != 1:
@@ -120,46 +113,41 @@ def _star_tracker(inputs: TaskInputs, params: Params) -> tuple[str, NDArray[np.f
         name = names[0]
     else:
         name = params.sensor
-        if name not in configured:
-            raise TaskError(f"star tracker {name!r} is not in the spacecraft configuration ({sorted(configured)})")
-    cols = inputs.stream("star_tracker", name)
-    t = np.asarray(cols["time_tai_ns"], dtype=np.int64)
-    q = np.column_stack([np.asarray(cols[f"q{i}"], dtype=np.float64) for i in range(4)])
-    order = np.argsort(t, kind="stable")
-    t, q = t[order], q[order]
-    keep = np.concatenate([[True], np.diff(t) > 0])
-    if not np.all(np.isfinite(q)):
+    q_BS = spacecraft.star_tracker_mounting(name)
+    st = inputs.star_tracker(name)
+    keep = np.concatenate([[True], np.diff(st.time_tai_ns) > 0])
+    if not np.all(np.isfinite(st.q_IS)):
         raise TaskError("star-tracker quaternions must be finite")
-    return name, _quat(configured[name], "q_BS", f"star_trackers.{name}"), t[keep], q[keep]
+    return name, q_BS, st.time_tai_ns[keep], st.q_IS[keep]
 
 
 def _gyro(inputs: TaskInputs, params: Params, notes: list[str]) -> tuple[str, NDArray[np.int64], NDArray[np.float64],
                                                                         NDArray[np.float64]]:
-    have = {name for name in ("gyro_increments", "gyro") if name in inputs.streams
-            and len(inputs.streams[name]["time_tai_ns"]) > 0}
+    have = {name for name in ("gyro_increments", "gyro") if inputs.sensors(name)}
     source = params.gyro_source
     if source == "auto":
         if not have:
             raise TaskError("no gyro_increments or gyro samples in the job window; one of them is needed")
         source = "gyro_increments" if "gyro_increments" in have else "gyro"
-    cols = inputs.stream(source)
-    sensors = sorted(set(np.asarray(cols["sensor"]).astype(str).tolist())) if "sensor" in cols else []
+    sensors = inputs.sensors(source)
     if len(sensors) > 1:
-        raise TaskError(f"the window holds several gyro sensors ({sensors}); one gyro triad is expected")
-    t = np.asarray(cols["time_tai_ns"], dtype=np.int64)
-    order = np.argsort(t, kind="stable")
-    t = t[order]
-    if np.any(np.diff(t) <= 0):
-        raise TaskError(f"{source} times must be distinct; {int(np.sum(np.diff(t) <= 0))} repeated time stamps")
+        raise TaskError(f"the window holds several gyro sensors ({list(sensors)}); one gyro triad is expected")
     if source == "gyro_increments":
-        incr = np.column_stack([np.asarray(cols[c], dtype=np.float64)[order] for c in ("dax", "day", "daz")])
-        interval = np.asarray(cols["interval_s"], dtype=np.float64)[order]
-        return source, t, incr, interval
-    w = np.column_stack([np.asarray(cols[c], dtype=np.float64)[order] for c in ("wx", "wy", "wz")])
+        inc = inputs.gyro_increments()
+        _distinct(inc.time_tai_ns, source)
+        return source, inc.time_tai_ns, inc.da_G_rad, inc.interval_s
+    g = inputs.gyro()
+    t = g.time_tai_ns
+    _distinct(t, source)
     t_s = (t - t[0]).astype(np.float64) / NS_PER_S
-    t_end, incr, interval = increments_from_rates(t_s, w)
+    t_end, incr, interval = increments_from_rates(t_s, g.w_G_rad_s)
     notes.append(f"gyro rates ({t.size} samples) integrated to increments by the trapezoidal rule")
     return source, t[0] + np.round(t_end * NS_PER_S).astype(np.int64), incr, interval
+
+
+def _distinct(t: NDArray[np.int64], source: str) -> None:
+    if np.any(np.diff(t) <= 0):
+        raise TaskError(f"{source} times must be distinct; {int(np.sum(np.diff(t) <= 0))} repeated time stamps")
 
 
 def _history_entry(entry: dict[str, object]) -> dict[str, Any]:
@@ -175,16 +163,41 @@ def _history_entry(entry: dict[str, object]) -> dict[str, Any]:
     return out
 
 
+@dataclass(frozen=True)
+class _Run:
+    """A finished calibration with what it was computed from: the sensors and streams used, their
+    frames (q_BS, q_BG configured, q_GS_nom = q_BG^-1 o q_BS), the time origin t0 (TAI ns) of the
+    calibration's seconds and the job window."""
+
+    cal: GyroCalibration
+    params: Params
+    sensor: str
+    source: str
+    t0: int
+    q_BS: NDArray[np.float64]
+    q_BG: NDArray[np.float64]
+    q_GS_nom: NDArray[np.float64]
+    n_gyro: int
+    n_st: int
+    window_start_tai_ns: int
+    window_end_tai_ns: int
+
+    def ns(self, t_s: Any) -> NDArray[np.int64]:
+        """Calibration seconds -> TAI ns."""
+        return self.t0 + np.round(np.asarray(t_s, dtype=np.float64) * NS_PER_S).astype(np.int64)
+
+    @property
+    def complete(self) -> bool:
+        return bool(np.all(self.cal.alignment.observable_axes) and self.cal.converged)
+
+
 def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
     notes: list[str] = []
     progress(0.01, "loading star tracker and gyro")
     sensor, q_BS, st_ns, q_IS = _star_tracker(inputs, params)
-    gyro_entry = inputs.config.get("gyro")
-    if gyro_entry is None:
-        q_BG = np.array([1.0, 0.0, 0.0, 0.0])
+    if not inputs.spacecraft.has_gyro:
         notes.append("no gyro.q_BG in the configuration: the gyro frame is taken as the body frame")
-    else:
-        q_BG = _quat(gyro_entry, "q_BG", "gyro")
+    q_BG = inputs.spacecraft.gyro_mounting()
     source, g_ns, incr, interval = _gyro(inputs, params, notes)
     q_GS_nom = rotations.quat_canonical(rotations.quat_multiply(rotations.quat_conjugate(q_BG), q_BS))
     t0 = int(min(st_ns[0], g_ns[0] - int(round(interval[0] * NS_PER_S))))
@@ -200,73 +213,94 @@ def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
     except ValueError as exc:
         raise TaskError(str(exc)) from exc
     progress(0.95, "summary and tables")
-    return _result(cal, params, notes, sensor=sensor, source=source, t0=t0, q_BS=q_BS, q_BG=q_BG,
-                   q_GS_nom=q_GS_nom, n_gyro=int(g_ns.size), n_st=int(st_ns.size), inputs=inputs)
+    done = _Run(cal=cal, params=params, sensor=sensor, source=source, t0=t0, q_BS=q_BS, q_BG=q_BG,
+                q_GS_nom=q_GS_nom, n_gyro=int(g_ns.size), n_st=int(st_ns.size),
+                window_start_tai_ns=inputs.start_tai_ns, window_end_tai_ns=inputs.end_tai_ns)
+    return TaskResult(summary=_summary(done), tables=_tables(cal, done.ns), notes=notes + _notes(done))
 
 
-def _result(cal: GyroCalibration, params: Params, notes: list[str], *, sensor: str, source: str, t0: int,
-            q_BS: NDArray[np.float64], q_BG: NDArray[np.float64], q_GS_nom: NDArray[np.float64], n_gyro: int,
-            n_st: int, inputs: TaskInputs) -> TaskResult:
-    est = cal.alignment
-    obs = cal.observer
-
-    def ns(t_s: Any) -> NDArray[np.int64]:
-        return t0 + np.round(np.asarray(t_s, dtype=np.float64) * NS_PER_S).astype(np.int64)
-
-    observable = est.observable_axes
-    mis = np.where(observable, est.misalignment_rad, np.nan)
-    sig = est.misalignment_sigma_rad
-    q_mis = rotations.quat_canonical(rotations.rotvec_to_quat(est.misalignment_rad))
-    q_BG_cal = rotations.quat_canonical(rotations.quat_multiply(q_BS, rotations.quat_conjugate(est.q_GS)))
+def _notes(r: _Run) -> list[str]:
+    observable = r.cal.alignment.observable_axes
+    notes = []
     if not np.all(observable):
         notes.append(
             "misalignment about " + ", ".join("xyz"[i] for i in np.flatnonzero(~observable)) + " (star-tracker axes) "
             "is not observable from the rate directions in the window: reported as null and kept at the "
             "configured mounting in the quaternions"
         )
-    if not cal.converged:
-        notes.append(f"the calibration did not settle within {params.iterations} passes (change above "
-                     f"{params.change_tolerance_sigma} sigma)")
+    if not r.cal.converged:
+        notes.append(f"the calibration did not settle within {r.params.iterations} passes (change above "
+                     f"{r.params.change_tolerance_sigma} sigma)")
+    return notes
+
+
+def _summary(r: _Run) -> dict[str, Any]:
+    """DESIGN.md summary of alignment_calibration (module docstring), in report order."""
+    return {
+        "sensor": r.sensor,
+        "gyro_stream": r.source,
+        "n_star_tracker_samples": r.n_st,
+        "n_gyro_samples": r.n_gyro,
+        "window_start_tai_ns": r.window_start_tai_ns,
+        "window_end_tai_ns": r.window_end_tai_ns,
+        **_alignment_summary(r),
+        **_drift_summary(r),
+        **_process_summary(r),
+        "calibration_complete": r.complete,
+        "calibration": _calibration(r),
+    }
+
+
+def _alignment_summary(r: _Run) -> dict[str, Any]:
+    est = r.cal.alignment
+    observable = est.observable_axes
+    mis = np.where(observable, est.misalignment_rad, np.nan)
+    sig = est.misalignment_sigma_rad
+    return {
+        "misalignment_rad": _floats(mis),
+        "misalignment_arcsec": _floats(mis / RAD_PER_ARCSEC),
+        "misalignment_sigma_rad": _floats(sig),
+        "misalignment_sigma_arcsec": _floats(sig / RAD_PER_ARCSEC),
+        "misalignment_quaternion": _floats(rotations.quat_canonical(rotations.rotvec_to_quat(est.misalignment_rad))),
+        "misalignment_observable": [bool(v) for v in observable],
+        "q_GS": _floats(est.q_GS),
+        "q_GS_nominal": _floats(r.q_GS_nom),
+        "rate_spread_eigenvalues": _floats(est.spread_eigenvalues),
+        "scale_factor_error": float(est.scale_factor_error),
+        "scale_factor_error_sigma": float(est.scale_factor_sigma),
+        "scale_factor_error_percent": float(100.0 * est.scale_factor_error),
+    }
+
+
+def _drift_summary(r: _Run) -> dict[str, Any]:
+    cal = r.cal
+    model = cal.drift_model
+    return {
+        "drift_rad_s": _floats(cal.drift_rad_s),
+        "drift_arcsec_s": _floats(cal.drift_rad_s / RAD_PER_ARCSEC),
+        "drift_frame": "gyro (w_meas = (1 + m) S^Delta w + b)",
+        "drift_time_tai_ns": int(r.ns(cal.observer.t_s[-1])),
+        "drift_noise_rad_s": _floats(cal.drift_noise_rad_s),
+        "drift_convergence_s": float(cal.drift_convergence_s) if np.isfinite(cal.drift_convergence_s) else None,
+        "drift_model": {
+            "t_ref_tai_ns": int(r.ns(model.t_ref_s)), "scale_s": model.scale_s,
+            "coefficients_rad_s": [_floats(c) for c in model.coefficients],
+        },
+        "alignment_drift_offset_rad_s": _floats(cal.alignment.drift_offset(cal.observer.t_s[-1])),
+    }
+
+
+def _process_summary(r: _Run) -> dict[str, Any]:
+    """Windows, iterations, observer, noise, slews: how the calibration was obtained."""
+    cal, params = r.cal, r.params
+    est, obs, slews = cal.alignment, cal.observer, cal.slews
+    assert slews is not None
     corrected = obs.mode == 1
     innov = obs.innovation_rad
     residual_rms = np.sqrt(np.mean(innov[corrected] ** 2, axis=0)) if np.any(corrected) else np.full(3, np.nan)
     st_noise = float(np.sqrt(np.mean(cal.st_noise_rad**2)))
     att_sd, drift_sd = stationary_noise(float(np.median(np.diff(obs.t_s))), params.t_r_s, st_noise, params.xi)
-    slews = cal.slews
-    assert slews is not None
-    model = cal.drift_model
-    end_ns = int(ns(obs.t_s[-1]))
-    complete = bool(np.all(observable) and cal.converged)
-    summary: dict[str, Any] = {
-        "sensor": sensor,
-        "gyro_stream": source,
-        "n_star_tracker_samples": n_st,
-        "n_gyro_samples": n_gyro,
-        "window_start_tai_ns": inputs.start_tai_ns,
-        "window_end_tai_ns": inputs.end_tai_ns,
-        "misalignment_rad": _floats(mis),
-        "misalignment_arcsec": _floats(mis / RAD_PER_ARCSEC),
-        "misalignment_sigma_rad": _floats(sig),
-        "misalignment_sigma_arcsec": _floats(sig / RAD_PER_ARCSEC),
-        "misalignment_quaternion": _floats(q_mis),
-        "misalignment_observable": [bool(v) for v in observable],
-        "q_GS": _floats(est.q_GS),
-        "q_GS_nominal": _floats(q_GS_nom),
-        "rate_spread_eigenvalues": _floats(est.spread_eigenvalues),
-        "scale_factor_error": float(est.scale_factor_error),
-        "scale_factor_error_sigma": float(est.scale_factor_sigma),
-        "scale_factor_error_percent": float(100.0 * est.scale_factor_error),
-        "drift_rad_s": _floats(cal.drift_rad_s),
-        "drift_arcsec_s": _floats(cal.drift_rad_s / RAD_PER_ARCSEC),
-        "drift_frame": "gyro (w_meas = (1 + m) S^Delta w + b)",
-        "drift_time_tai_ns": end_ns,
-        "drift_noise_rad_s": _floats(cal.drift_noise_rad_s),
-        "drift_convergence_s": float(cal.drift_convergence_s) if np.isfinite(cal.drift_convergence_s) else None,
-        "drift_model": {
-            "t_ref_tai_ns": int(ns(model.t_ref_s)), "scale_s": model.scale_s,
-            "coefficients_rad_s": [_floats(c) for c in model.coefficients],
-        },
-        "alignment_drift_offset_rad_s": _floats(est.drift_offset(obs.t_s[-1])),
+    return {
         "calibration_windows": int(est.n_windows),
         "calibration_windows_found": int(cal.windows.starts.size),
         "alignment_samples": int(est.n_samples),
@@ -288,16 +322,19 @@ def _result(cal: GyroCalibration, params: Params, notes: list[str], *, sensor: s
         "slew_bound_exceeded": int(np.sum(slews.end_error_rad > slews.bound_rad)),
         "integration_error_max_arcsec": cal.integration_error_rad / RAD_PER_ARCSEC,
         "solver_disagreement_rad": est.solver_disagreement_rad,
-        "calibration_complete": complete,
-        "calibration": {
-            "kind": "gyro", "paper": "000", "star_tracker": sensor, "valid_from_tai_ns": int(ns(obs.t_s[0])),
-            "valid_to_tai_ns": end_ns, "q_BG": _floats(q_BG_cal), "q_BG_configured": _floats(q_BG),
-            "q_GS": _floats(est.q_GS), "scale_factor_error": float(est.scale_factor_error),
-            "drift_rad_s": _floats(cal.drift_rad_s), "complete": complete,
-        },
     }
-    tables = _tables(cal, ns)
-    return TaskResult(summary=summary, tables=tables, notes=notes)
+
+
+def _calibration(r: _Run) -> dict[str, Any]:
+    """The calibration version the service stores for the spacecraft's gyro (q_BG = q_BS o q_GS^-1)."""
+    est, obs = r.cal.alignment, r.cal.observer
+    q_BG_cal = rotations.quat_canonical(rotations.quat_multiply(r.q_BS, rotations.quat_conjugate(est.q_GS)))
+    return {
+        "kind": "gyro", "paper": "000", "star_tracker": r.sensor, "valid_from_tai_ns": int(r.ns(obs.t_s[0])),
+        "valid_to_tai_ns": int(r.ns(obs.t_s[-1])), "q_BG": _floats(q_BG_cal), "q_BG_configured": _floats(r.q_BG),
+        "q_GS": _floats(est.q_GS), "scale_factor_error": float(est.scale_factor_error),
+        "drift_rad_s": _floats(r.cal.drift_rad_s), "complete": r.complete,
+    }
 
 
 def _tables(cal: GyroCalibration, ns: Any) -> dict[str, dict[str, NDArray[Any]]]:

@@ -92,7 +92,7 @@ def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
         energy_reference = f"reference orbit {orbit.name} ({orbit.details.get('frame', frame)})"
     nav_ref = inputs.reference.get("rinex_nav")
     progress(0.1, "screening")
-    result = screen(inputs.streams, inputs.config, _screening_params(params), reference_orbit=reference,
+    result = screen(inputs.streams, inputs.spacecraft, _screening_params(params), reference_orbit=reference,
                     reference_frame=frame, nav=None if nav_ref is None else nav_ref.columns, selected=selected)
     notes += result.notes
     progress(0.7, "flags table")

@@ -9,6 +9,7 @@ the paper's sigma_w² C^-1 figure (``*_sigma_paper``). Figures follow 003 figs. 
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Annotated, Any, Literal
 
 import numpy as np
@@ -29,7 +30,7 @@ from processing.gyro_calibration.bias_fit import (
 from processing.signal.sine_series import SineSeriesError, fit_sine_series, select_harmonics
 from processing.tasks import Progress, TaskError, TaskInputs, TaskResult
 from processing.time.timescales import tai_ns_to_iso
-from processing.units import NS_PER_S, RAD_PER_ARCSEC, RAD_PER_DEG
+from processing.units import ARCSEC_PER_RAD, NS_PER_S, RAD_PER_ARCSEC, RAD_PER_DEG
 
 RATES_TABLE_MAX_ROWS = 20_000
 """The "rates" table (figure 13a) keeps every k-th gyro sample so that it has at most this many rows."""
@@ -85,20 +86,12 @@ def _iso(t_ns: int) -> str:
     return str(tai_ns_to_iso(np.array([t_ns], dtype=np.int64))[0])
 
 
-def _q(config_entry: Any, key: str, what: str) -> NDArray[np.float64]:
-    try:
-        q = np.asarray(config_entry[key], dtype=np.float64)
-    except (KeyError, TypeError, ValueError):
-        raise TaskError(f"spacecraft configuration has no valid {what}.{key}") from None
-    if q.shape != (4,) or not np.all(np.isfinite(q)) or np.linalg.norm(q) < 1e-12:
-        raise TaskError(f"{what}.{key} must be 4 finite numbers (scalar first), got {config_entry[key]!r}")
-    return rotations.quat_normalize(q)
-
-
 def _choose_sensors(inputs: TaskInputs, params: Params) -> tuple[list[str], dict[str, NDArray[np.float64]]]:
-    configured = dict(inputs.config.get("star_trackers") or {})
-    st = inputs.stream("star_tracker")
-    present = sorted(set(np.asarray(st["sensor"]).tolist()))
+    spacecraft = inputs.spacecraft
+    configured = spacecraft.star_tracker_names
+    present = list(inputs.sensors("star_tracker"))
+    if not present:
+        raise TaskError("no star_tracker samples in the job window")
     if params.sensor is None:
         names = [name for name in configured if name in present]
         if not names:
@@ -111,22 +104,18 @@ def _choose_sensors(inputs: TaskInputs, params: Params) -> tuple[list[str], dict
         if not names or len(set(names)) != len(names):
             raise TaskError(f"sensor must name distinct star trackers, got {params.sensor!r}")
         for name in names:
-            if name not in configured:
-                raise TaskError(f"star tracker {name!r} is not in the spacecraft configuration ({sorted(configured)})")
+            spacecraft.star_tracker_mounting(name)  # MissingMountingError naming it
             if name not in present:
                 raise TaskError(f"no star_tracker samples of sensor {name!r} in the window (present: {present})")
-    return names, {name: _q(configured[name], "q_BS", f"star_trackers.{name}") for name in names}
+    return names, {name: spacecraft.star_tracker_mounting(name) for name in names}
 
 
 def _gyro(inputs: TaskInputs, params: Params, notes: list[str]) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
-    g = inputs.stream("gyro")
-    names = sorted(set(np.asarray(g["sensor"]).tolist())) if "sensor" in g else []
+    names = inputs.sensors("gyro")
     if len(names) > 1:
-        raise TaskError(f"the window holds several gyro sensors ({names}); one gyro triad is expected")
-    t = np.asarray(g["time_tai_ns"], dtype=np.int64)
-    w = np.column_stack([np.asarray(g[c], dtype=np.float64) for c in ("wx", "wy", "wz")])
-    order = np.argsort(t, kind="stable")
-    t, w = t[order], w[order]
+        raise TaskError(f"the window holds several gyro sensors ({list(names)}); one gyro triad is expected")
+    g = inputs.gyro()
+    t, w = g.time_tai_ns, g.w_G_rad_s
     if t.size < 8:
         raise TaskError(f"need at least 8 gyro samples, got {t.size}")
     dt = np.diff(t)
@@ -154,93 +143,132 @@ def _bias_body(fit: GyroBiasFit, q_BG: NDArray[np.float64], cov: NDArray[np.floa
     return b, np.sqrt(np.diag(r_br @ cov @ r_br.T))
 
 
-def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
-    """Fit gyro offsets and the initial attitude to star-tracker quaternions (003 §2.1-2.4)."""
-    notes: list[str] = []
-    progress(0.0, "loading")
-    names, q_BS = _choose_sensors(inputs, params)
-    q_BG = _q(inputs.config["gyro"], "q_BG", "gyro") if "gyro" in inputs.config else np.array([1.0, 0.0, 0.0, 0.0])
-    t_g_ns, w_G = _gyro(inputs, params, notes)
-    ref = names[0]
-    q_SB_ref = rotations.quat_conjugate(q_BS[ref])
+@dataclass(frozen=True)
+class _Window:
+    """The window as the fit sees it: gyro rates on their grid and the star-tracker samples within
+    the gyro span, times in s from ``epoch`` (the first gyro time), mountings relative to the
+    reference tracker R (003 §2.4)."""
 
-    st = inputs.stream("star_tracker")
-    sensor_col = np.asarray(st["sensor"])
-    keep = np.isin(sensor_col, names) & (st["time_tai_ns"] >= t_g_ns[0]) & (st["time_tai_ns"] <= t_g_ns[-1])
-    outside = int(np.count_nonzero(np.isin(sensor_col, names))) - int(np.count_nonzero(keep))
-    if outside:
-        notes.append(f"{outside} star-tracker samples outside the gyro time span were not used")
-    t_st_ns = np.asarray(st["time_tai_ns"], dtype=np.int64)[keep]
-    q_IS = np.column_stack([np.asarray(st[f"q{i}"], dtype=np.float64)[keep] for i in range(4)])
-    sensor_of = sensor_col[keep]
+    names: list[str]
+    q_BG: NDArray[np.float64]
+    epoch: int
+    t_g_ns: NDArray[np.int64]
+    w_G: NDArray[np.float64]
+    t_st_ns: NDArray[np.int64]
+    q_IS: NDArray[np.float64]
+    sensor_of: NDArray[Any]
+    sensor_index: NDArray[np.int64]
+    q_RS: NDArray[np.float64]
+    q_RG: NDArray[np.float64]
+
+    @property
+    def t_g(self) -> NDArray[np.float64]:
+        return (self.t_g_ns - self.epoch).astype(np.float64) / NS_PER_S
+
+    @property
+    def t_st(self) -> NDArray[np.float64]:
+        return (self.t_st_ns - self.epoch).astype(np.float64) / NS_PER_S
+
+
+@dataclass(frozen=True)
+class _Outcome:
+    """Everything the report needs: the window, the fits (whole segment and sub-intervals with their
+    edges, s from the epoch, and kinds), the gyro noise used and the rates fitted."""
+
+    window: _Window
+    params: Params
+    fit: GyroBiasFit
+    subs: list[GyroBiasFit | None]
+    edges: NDArray[np.float64]
+    kinds: list[tuple[str, int, int]]
+    arw: NDArray[np.float64]
+    arw_source: str
+    w_ap: NDArray[np.float64] | None
+    harmonics: int | None
+
+
+def _window(inputs: TaskInputs, params: Params, notes: list[str]) -> _Window:
+    names, q_BS = _choose_sensors(inputs, params)
+    q_BG = inputs.spacecraft.gyro_mounting()
+    t_g_ns, w_G = _gyro(inputs, params, notes)
+    views = [inputs.star_tracker(name) for name in sorted(names)]  # stored order: (sensor, time)
+    t_all = np.concatenate([v.time_tai_ns for v in views])
+    keep = (t_all >= t_g_ns[0]) & (t_all <= t_g_ns[-1])
+    if int(np.count_nonzero(~keep)):
+        notes.append(f"{int(np.count_nonzero(~keep))} star-tracker samples outside the gyro time span were not used")
+    t_st_ns = t_all[keep]
+    q_IS = np.concatenate([v.q_IS for v in views])[keep]
+    sensor_of = np.concatenate([np.full(len(v), v.sensor, dtype=object) for v in views])[keep]
     sensor_index = np.zeros(sensor_of.size, dtype=np.int64)
     for j, name in enumerate(names):
         sensor_index[sensor_of == name] = j
     if t_st_ns.size < 4:
         raise TaskError(f"need at least 4 star-tracker samples within the gyro span, got {t_st_ns.size}")
+    q_SB_ref = rotations.quat_conjugate(q_BS[names[0]])
     q_RS = np.stack([rotations.quat_multiply(q_SB_ref, q_BS[s]) for s in names])[sensor_index]
-    q_RG = rotations.quat_multiply(q_SB_ref, q_BG)
+    return _Window(names=names, q_BG=q_BG, epoch=int(t_g_ns[0]), t_g_ns=t_g_ns, w_G=w_G, t_st_ns=t_st_ns,
+                   q_IS=q_IS, sensor_of=sensor_of, sensor_index=sensor_index, q_RS=q_RS,
+                   q_RG=rotations.quat_multiply(q_SB_ref, q_BG))
 
-    epoch = int(t_g_ns[0])
-    t_g = (t_g_ns - epoch).astype(np.float64) / NS_PER_S
-    t_st = (t_st_ns - epoch).astype(np.float64) / NS_PER_S
 
+def _arw(win: _Window, params: Params) -> tuple[NDArray[np.float64], str]:
     if params.gyro_arw_rad_sqrt_s is None:
-        arw = estimate_gyro_arw(t_g, w_G)
-        arw_source = "estimated from the second differences of the gyro rates"
-    else:
-        arw = np.broadcast_to(np.asarray(params.gyro_arw_rad_sqrt_s, dtype=np.float64), (3,)).copy()
-        if np.any(arw < 0):
-            raise TaskError(f"gyro_arw_rad_sqrt_s must be >= 0, got {params.gyro_arw_rad_sqrt_s!r}")
-        arw_source = "given"
+        return estimate_gyro_arw(win.t_g, win.w_G), "estimated from the second differences of the gyro rates"
+    arw = np.broadcast_to(np.asarray(params.gyro_arw_rad_sqrt_s, dtype=np.float64), (3,)).copy()
+    if np.any(arw < 0):
+        raise TaskError(f"gyro_arw_rad_sqrt_s must be >= 0, got {params.gyro_arw_rad_sqrt_s!r}")
+    return arw, "given"
 
-    w_fit = w_G
-    harmonics = None
-    if params.use_smoothed_rates:
-        progress(0.05, "smoothing gyro rates (omega_ap)")
-        try:
-            if params.smoothing_harmonics is None:
-                harmonics, _ = select_harmonics(t_g, w_G, MAX_SMOOTHING_HARMONICS)
-            else:
-                harmonics = params.smoothing_harmonics
-            w_fit = fit_sine_series(t_g, w_G, harmonics).evaluate(t_g)
-        except SineSeriesError as exc:
-            raise TaskError(f"smoothing the gyro rates failed: {exc}") from exc
-        notes.append(
-            f"rates smoothed by a sine series with M = {harmonics} harmonics (003 §2.1 omega_ap); the honest "
-            "covariance treats the remaining low-frequency gyro noise as a random walk (approximate)"
-        )
 
-    common = {
-        "q_RG": q_RG,
-        "weights": params.weights,
-        "scheme": params.scheme,
-        "gyro_arw_rad_sqrt_s": arw,
-        "max_iterations": params.max_iterations,
-    }
+def _rates_to_fit(win: _Window, params: Params, notes: list[str],
+                  progress: Progress) -> tuple[NDArray[np.float64], int | None]:
+    """The gyro samples, or with use_smoothed_rates their sine-series approximation omega_ap (003 §2.1)."""
+    if not params.use_smoothed_rates:
+        return win.w_G, None
+    progress(0.05, "smoothing gyro rates (omega_ap)")
+    t_g = win.t_g
+    try:
+        if params.smoothing_harmonics is None:
+            harmonics, _ = select_harmonics(t_g, win.w_G, MAX_SMOOTHING_HARMONICS)
+        else:
+            harmonics = params.smoothing_harmonics
+        w_fit = fit_sine_series(t_g, win.w_G, harmonics).evaluate(t_g)
+    except SineSeriesError as exc:
+        raise TaskError(f"smoothing the gyro rates failed: {exc}") from exc
+    notes.append(
+        f"rates smoothed by a sine series with M = {harmonics} harmonics (003 §2.1 omega_ap); the honest "
+        "covariance treats the remaining low-frequency gyro noise as a random walk (approximate)"
+    )
+    return w_fit, harmonics
+
+
+def _fit(win: _Window, params: Params, w_fit: NDArray[np.float64], arw: NDArray[np.float64], notes: list[str],
+         progress: Progress) -> tuple[GyroBiasFit, list[GyroBiasFit | None], NDArray[np.float64],
+                                      list[tuple[str, int, int]]]:
+    """The whole segment (003 §2.2), then its sub-intervals and sliding windows (003 §2.4)."""
+    t_g, t_st = win.t_g, win.t_st
     progress(0.1, "fitting the whole segment")
     try:
         fit = fit_gyro_bias(
-            t_g, w_fit, t_st, q_IS, q_RS=q_RS, sensor_index=sensor_index,
-            estimate_mounting=params.estimate_mounting,
+            t_g, w_fit, t_st, win.q_IS, q_RS=win.q_RS, sensor_index=win.sensor_index, q_RG=win.q_RG,
+            weights=params.weights, scheme=params.scheme, gyro_arw_rad_sqrt_s=arw,
+            max_iterations=params.max_iterations, estimate_mounting=params.estimate_mounting,
             mounting_sigma_max_rad=params.mounting_sigma_max_arcsec * RAD_PER_ARCSEC,
-            **common,  # type: ignore[arg-type]
         )
     except GyroBiasFitError as exc:
         raise TaskError(str(exc)) from exc
     if not fit.converged:
         notes.append(f"Gauss-Newton {fit.status}")
-
     progress(0.5, "sub-intervals")
     try:
         edges = subinterval_edges(
             float(t_st.min()), float(t_st.max()), splits=params.subintervals,
             window_s=params.sliding_window_s, step_s=params.sliding_step_s,
         )
-        sub_common = {**common, "q_RG": fit.q_RG}
         subs = fit_subintervals(
-            t_g, w_fit, t_st, q_IS, edges, q_RS=q_RS, sensor_index=sensor_index,
-            **sub_common,  # type: ignore[arg-type]
+            t_g, w_fit, t_st, win.q_IS, edges, q_RS=win.q_RS, sensor_index=win.sensor_index, q_RG=fit.q_RG,
+            weights=params.weights, scheme=params.scheme, gyro_arw_rad_sqrt_s=arw,
+            max_iterations=params.max_iterations,
         )
     except GyroBiasFitError as exc:
         raise TaskError(f"sub-interval fits: {exc}") from exc
@@ -249,45 +277,35 @@ def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
     skipped = sum(s is None for s in subs)
     if skipped:
         notes.append(f"{skipped} sub-intervals with fewer than 10 star-tracker samples were skipped")
+    return fit, subs, edges, kinds
 
+
+def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
+    """Fit gyro offsets and the initial attitude to star-tracker quaternions (003 §2.1-2.4)."""
+    notes: list[str] = []
+    progress(0.0, "loading")
+    win = _window(inputs, params, notes)
+    arw, arw_source = _arw(win, params)
+    w_fit, harmonics = _rates_to_fit(win, params, notes, progress)
+    fit, subs, edges, kinds = _fit(win, params, w_fit, arw, notes, progress)
     progress(0.9, "report")
-    summary, tables = _report(
-        fit, subs, edges, kinds, names, q_BG, epoch, t_g_ns, w_G, w_fit if params.use_smoothed_rates else None,
-        t_st_ns, sensor_of, arw, arw_source, params, harmonics, t_g,
-    )
+    outcome = _Outcome(window=win, params=params, fit=fit, subs=subs, edges=edges, kinds=kinds, arw=arw,
+                       arw_source=arw_source, w_ap=w_fit if params.use_smoothed_rates else None, harmonics=harmonics)
+    sub_rows = _subinterval_rows(outcome)
+    summary = _summary(outcome, sub_rows)
+    tables = {**_series_tables(outcome), "subintervals": _subinterval_table(sub_rows)}
     progress(1.0, "done")
     return TaskResult(summary=summary, tables=tables, notes=notes)
 
 
-def _report(
-    fit: GyroBiasFit,
-    subs: list[GyroBiasFit | None],
-    edges: NDArray[np.float64],
-    kinds: list[tuple[str, int, int]],
-    names: list[str],
-    q_BG: NDArray[np.float64],
-    epoch: int,
-    t_g_ns: NDArray[np.int64],
-    w_G: NDArray[np.float64],
-    w_ap: NDArray[np.float64] | None,
-    t_st_ns: NDArray[np.int64],
-    sensor_of: NDArray[Any],
-    arw: NDArray[np.float64],
-    arw_source: str,
-    params: Params,
-    harmonics: int | None,
-    t_g: NDArray[np.float64],
-) -> tuple[dict[str, Any], dict[str, dict[str, NDArray[Any]]]]:
-    ref = names[0]
-    b, b_sig = _bias_body(fit, q_BG, fit.covariance[3:6, 3:6])
-    _, b_sig_paper = _bias_body(fit, q_BG, fit.covariance_paper[3:6, 3:6])
-    q_BR = rotations.quat_multiply(q_BG, rotations.quat_conjugate(fit.q_RG))
-    q_IB0 = rotations.quat_canonical(rotations.quat_multiply(fit.q_IR0, rotations.quat_conjugate(q_BR)))
-    t0_ns = epoch + int(round(fit.t0_s * NS_PER_S))
-    arcsec = 1.0 / RAD_PER_ARCSEC
+# ---------------------------------------------------------------------------------------------------
+# Report: summary and tables.
 
-    sub_rows = []
-    for (a, e), fit_k, (kind, parts, index) in zip(edges, subs, kinds, strict=True):
+
+def _subinterval_rows(r: _Outcome) -> list[dict[str, Any]]:
+    epoch, q_BG, arcsec = r.window.epoch, r.window.q_BG, ARCSEC_PER_RAD
+    rows = []
+    for (a, e), fit_k, (kind, parts, index) in zip(r.edges, r.subs, r.kinds, strict=True):
         start_ns, end_ns = epoch + int(round(a * NS_PER_S)), epoch + int(round(e * NS_PER_S))
         row: dict[str, Any] = {
             "kind": kind, "parts": parts, "index": index,
@@ -309,23 +327,34 @@ def _report(
                 residual_rms_arcsec=_floats(fit_k.residual_rms_rad[0] * arcsec),
                 converged=bool(fit_k.converged),
             )
-        sub_rows.append(row)
+        rows.append(row)
+    return rows
 
-    mounting: dict[str, Any] | None = None
-    if fit.mounting is not None:
-        m = fit.mounting
-        mounting = {
-            "determinable": bool(m.determinable),
-            "reason": m.reason,
-            "misalignment_sensor_rad": None if m.rotvec_R_rad is None else _floats(m.rotvec_R_rad),
-            "misalignment_sigma_sensor_rad": _floats(m.sigma_rad),
-            "misalignment_sigma_paper_sensor_rad": _floats(m.sigma_paper_rad),
-            "q_BS": None if m.rotvec_R_rad is None else _floats(rotations.quat_canonical(q_BR)),
-            "condition_number": float(m.condition_number),
-            "max_abs_correlation": float(m.max_abs_correlation),
-            "correlation": [_floats(r) for r in m.correlation],
-        }
 
+def _mounting(fit: GyroBiasFit, q_BR: NDArray[np.float64]) -> dict[str, Any] | None:
+    if fit.mounting is None:
+        return None
+    m = fit.mounting
+    return {
+        "determinable": bool(m.determinable),
+        "reason": m.reason,
+        "misalignment_sensor_rad": None if m.rotvec_R_rad is None else _floats(m.rotvec_R_rad),
+        "misalignment_sigma_sensor_rad": _floats(m.sigma_rad),
+        "misalignment_sigma_paper_sensor_rad": _floats(m.sigma_paper_rad),
+        "q_BS": None if m.rotvec_R_rad is None else _floats(rotations.quat_canonical(q_BR)),
+        "condition_number": float(m.condition_number),
+        "max_abs_correlation": float(m.max_abs_correlation),
+        "correlation": [_floats(r) for r in m.correlation],
+    }
+
+
+def _summary(r: _Outcome, sub_rows: list[dict[str, Any]]) -> dict[str, Any]:
+    fit, win, params, arcsec = r.fit, r.window, r.params, ARCSEC_PER_RAD
+    b, b_sig = _bias_body(fit, win.q_BG, fit.covariance[3:6, 3:6])
+    _, b_sig_paper = _bias_body(fit, win.q_BG, fit.covariance_paper[3:6, 3:6])
+    q_BR = rotations.quat_multiply(win.q_BG, rotations.quat_conjugate(fit.q_RG))
+    q_IB0 = rotations.quat_canonical(rotations.quat_multiply(fit.q_IR0, rotations.quat_conjugate(q_BR)))
+    t0_ns = win.epoch + int(round(fit.t0_s * NS_PER_S))
     sensors = {
         name: {
             "n_samples": int(fit.n_samples[j]),
@@ -333,9 +362,9 @@ def _report(
             "residual_rms_gyro_arcsec": _floats(fit.residual_rms_gyro_rad[j] * arcsec),
             "star_tracker_sigma_arcsec": _floats(fit.star_tracker_sigma_rad[j] * arcsec),
         }
-        for j, name in enumerate(names)
+        for j, name in enumerate(win.names)
     }
-    summary: dict[str, Any] = {
+    return {
         "gyro_bias_rad_s": _floats(b),
         "gyro_bias_sigma_rad_s": _floats(b_sig),
         "gyro_bias_sigma_paper_rad_s": _floats(b_sig_paper),
@@ -360,36 +389,45 @@ def _report(
         "status": fit.status,
         "scheme": int(params.scheme),
         "use_smoothed_rates": bool(params.use_smoothed_rates),
-        "smoothing_harmonics": harmonics,
+        "smoothing_harmonics": r.harmonics,
         "weights": _floats(params.weights),
-        "gyro_arw_rad_sqrt_s": _floats(arw),
-        "gyro_arw_source": arw_source,
-        "reference_sensor": ref,
+        "gyro_arw_rad_sqrt_s": _floats(r.arw),
+        "gyro_arw_source": r.arw_source,
+        "reference_sensor": win.names[0],
         "sensors": sensors,
         "n_star_tracker_samples": int(fit.n_samples.sum()),
-        "n_gyro_samples": int(t_g_ns.size),
+        "n_gyro_samples": int(win.t_g_ns.size),
         "parameter_names": list(fit.parameter_names),
-        "covariance": [_floats(r) for r in fit.covariance],
-        "covariance_paper": [_floats(r) for r in fit.covariance_paper],
+        "covariance": [_floats(row) for row in fit.covariance],
+        "covariance_paper": [_floats(row) for row in fit.covariance_paper],
         "condition_number": float(fit.condition_number),
-        "mounting": mounting,
+        "mounting": _mounting(fit, q_BR),
         "subintervals": sub_rows,
     }
 
+
+def _series_tables(r: _Outcome) -> dict[str, dict[str, NDArray[Any]]]:
+    """Residual rotations per star-tracker sample and the body rates (every k-th gyro sample)."""
+    fit, win, arcsec = r.fit, r.window, ARCSEC_PER_RAD
+    b, _ = _bias_body(fit, win.q_BG, fit.covariance[3:6, 3:6])
     residuals = {
-        "time_tai_ns": t_st_ns,
-        "sensor": np.asarray(sensor_of, dtype=object),
+        "time_tai_ns": win.t_st_ns,
+        "sensor": np.asarray(win.sensor_of, dtype=object),
         **{f"e{i + 1}_arcsec": fit.residuals_rad[:, i] * arcsec for i in range(3)},
     }
-    stride = max(1, -(-t_g_ns.size // RATES_TABLE_MAX_ROWS))
-    r_bg = rotations.quat_to_dcm(q_BG)
-    w_B = (w_G[::stride] @ r_bg.T - b) / RAD_PER_DEG
-    rates: dict[str, NDArray[Any]] = {"time_tai_ns": t_g_ns[::stride]}
+    stride = max(1, -(-win.t_g_ns.size // RATES_TABLE_MAX_ROWS))
+    r_bg = rotations.quat_to_dcm(win.q_BG)
+    w_B = (win.w_G[::stride] @ r_bg.T - b) / RAD_PER_DEG
+    rates: dict[str, NDArray[Any]] = {"time_tai_ns": win.t_g_ns[::stride]}
     rates.update({f"w{i + 1}_B_deg_s": w_B[:, i] for i in range(3)})
-    if w_ap is not None:
-        w_ap_B = (w_ap[::stride] @ r_bg.T - b) / RAD_PER_DEG
+    if r.w_ap is not None:
+        w_ap_B = (r.w_ap[::stride] @ r_bg.T - b) / RAD_PER_DEG
         rates.update({f"w{i + 1}_B_ap_deg_s": w_ap_B[:, i] for i in range(3)})
-    sub_table: dict[str, NDArray[Any]] = {
+    return {"residuals": residuals, "rates": rates}
+
+
+def _subinterval_table(sub_rows: list[dict[str, Any]]) -> dict[str, NDArray[Any]]:
+    table: dict[str, NDArray[Any]] = {
         "kind": np.array([r["kind"] for r in sub_rows], dtype=object),
         "parts": np.array([r["parts"] for r in sub_rows], dtype=np.int64),
         "index": np.array([r["index"] for r in sub_rows], dtype=np.int64),
@@ -405,9 +443,8 @@ def _report(
         ("residual_rms_arcsec", "residual_rms{}_arcsec"),
     ):
         vals = np.array([r.get(key) or [np.nan] * 3 for r in sub_rows], dtype=np.float64).reshape(-1, 3)
-        sub_table.update({col.format(i + 1): vals[:, i] for i in range(3)})
-    return summary, {"residuals": residuals, "rates": rates, "subintervals": sub_table}
-
+        table.update({col.format(i + 1): vals[:, i] for i in range(3)})
+    return table
 
 # ---------------------------------------------------------------------------------------------------
 # Figures (003 figs. 13-16).

@@ -60,20 +60,12 @@ def _stats(x: np.ndarray) -> dict[str, float]:
     return {"mean": float(np.mean(x)), "std": float(np.std(x)), "min": float(np.min(x)), "max": float(np.max(x))}
 
 
-def _pick(inputs: TaskInputs, stream: str, requested: str | None) -> dict[str, np.ndarray]:
-    cols = inputs.stream(stream)
-    present = sorted(set(np.asarray(cols["sensor"]).astype(str).tolist()))
-    if requested is None:
-        if len(present) > 1:
-            raise TaskError(f"several {stream} sensors in the data ({present}); set the sensor parameter")
-        requested = present[0]
-    sel = inputs.stream(stream, requested)
-    order = np.argsort(np.asarray(sel["time_tai_ns"], dtype=np.int64), kind="stable")
-    return {k: np.asarray(v)[order] for k, v in sel.items()}
-
-
-def _xyz(cols: dict[str, np.ndarray], names: tuple[str, str, str]) -> np.ndarray:
-    return np.column_stack([np.asarray(cols[n], dtype=float) for n in names])
+def _sensor(inputs: TaskInputs, stream: str, requested: str | None) -> str | None:
+    """The requested sensor, or None for the only one in the data (TaskError when there are several)."""
+    present = inputs.sensors(stream)
+    if requested is None and len(present) > 1:
+        raise TaskError(f"several {stream} sensors in the data ({list(present)}); set the sensor parameter")
+    return requested
 
 
 def _intervals(t_ns: np.ndarray, flag: np.ndarray) -> list[dict[str, Any]]:
@@ -136,26 +128,17 @@ def _summary(r: GyrolessResult, params: Params) -> dict[str, Any]:
 
 
 def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
-    cfg = inputs.config
-    inertia = cfg.get("inertia_kg_m2")
-    if inertia is None:
+    spacecraft = inputs.spacecraft
+    if spacecraft.inertia_kg_m2 is None:
         raise TaskError("the spacecraft configuration has no inertia_kg_m2 (needed by the 004 dynamics model)")
-    notes: list[str] = []
-    q_BM = (cfg.get("magnetometer") or {}).get("q_BM")
-    q_BS = (cfg.get("sun_sensor") or {}).get("q_BS")
-    if q_BM is None:
-        notes.append("no magnetometer.q_BM configured: magnetometer axes taken as body axes")
-    if q_BS is None:
-        notes.append("no sun_sensor.q_BS configured: sun-sensor axes taken as body axes")
+    q_BM, q_BS = spacecraft.magnetometer_mounting(), spacecraft.sun_sensor_mounting()
     progress(0.05, "loading telemetry")
-    mag = _pick(inputs, "magnetometer", params.magnetometer_sensor)
-    sun_cols = inputs.streams.get("sun_sensor")
-    if sun_cols is None or len(sun_cols["time_tai_ns"]) == 0:
+    mag = inputs.magnetometer(_sensor(inputs, "magnetometer", params.magnetometer_sensor))
+    if not inputs.sensors("sun_sensor"):
         raise TaskError("no sun_sensor samples in the job window: the filter needs both vectors to start")
-    sun = _pick(inputs, "sun_sensor", params.sun_sensor_name)
-    gnss = _pick(inputs, "gnss", None)
-    tq = inputs.streams.get("magnetorquer")
-    tq_cols = _pick(inputs, "magnetorquer", None) if tq is not None and len(tq["time_tai_ns"]) else None
+    sun = inputs.sun_sensor(_sensor(inputs, "sun_sensor", params.sun_sensor_name))
+    gnss = inputs.gnss(_sensor(inputs, "gnss", None))
+    tq = inputs.magnetorquer(_sensor(inputs, "magnetorquer", None)) if inputs.sensors("magnetorquer") else None
     settings = GyrolessSettings(
         filter=params.filter, smoother=params.smoother, magnetometer_noise_nT=params.magnetometer_noise_nT,
         field_model_error_nT=params.field_model_error_nT, sun_sensor_noise_deg=params.sun_sensor_noise_deg,
@@ -167,18 +150,20 @@ def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
     progress(0.2, f"{params.filter} filter" + (" and smoother" if params.smoother else ""))
     try:
         r = estimate_gyroless_attitude(
-            mag_time_tai_ns=mag["time_tai_ns"], mag_M_nT=_xyz(mag, ("bx", "by", "bz")),
-            sun_time_tai_ns=sun["time_tai_ns"], sun_S=_xyz(sun, ("sx", "sy", "sz")),
-            gnss_time_tai_ns=gnss["time_tai_ns"], gnss_r_E_m=_xyz(gnss, ("x", "y", "z")),
-            gnss_v_E_m_s=_xyz(gnss, ("vx", "vy", "vz")), inertia_kg_m2=inertia,
-            torquer_time_tai_ns=None if tq_cols is None else tq_cols["time_tai_ns"],
-            torquer_mu_B_A_m2=None if tq_cols is None else _xyz(tq_cols, ("mx", "my", "mz")),
+            mag_time_tai_ns=mag.time_tai_ns, mag_M_nT=mag.b_M_nT, sun_time_tai_ns=sun.time_tai_ns, sun_S=sun.s_S,
+            gnss_time_tai_ns=gnss.time_tai_ns, gnss_r_E_m=gnss.r_E_m, gnss_v_E_m_s=gnss.v_E_m_s,
+            inertia_kg_m2=spacecraft.inertia_kg_m2,
+            torquer_time_tai_ns=None if tq is None else tq.time_tai_ns,
+            torquer_mu_B_A_m2=None if tq is None else tq.m_B_A_m2,
             q_BM=q_BM, q_BS=q_BS, settings=settings,
         )
     except (GyrolessError, ValueError) as exc:
         raise TaskError(str(exc)) from exc
     progress(0.9, "summary and tables")
-    summary = _summary(r, params)
+    return TaskResult(summary=_summary(r, params), tables=_tables(r), notes=list(r.notes))
+
+
+def _tables(r: GyrolessResult) -> dict[str, dict[str, np.ndarray]]:
     f = r.filtered
     att = {
         "time_tai_ns": r.time_tai_ns,
@@ -204,7 +189,7 @@ def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
     innov = {"time_tai_ns": r.time_tai_ns, "nis": r.nis, "nis_dof": r.nis_dof,
              "magnetometer_residual_deg": f.residual_rad[:, 0] * DEG_PER_RAD,
              "sun_residual_deg": f.residual_rad[:, 1] * DEG_PER_RAD}
-    return TaskResult(summary=summary, tables={"attitude": att, "innovations": innov}, notes=notes + r.notes)
+    return {"attitude": att, "innovations": innov}
 
 
 def _shade_outages(ax: Any, result: TaskResult, t0: int) -> None:
@@ -212,13 +197,15 @@ def _shade_outages(ax: Any, result: TaskResult, t0: int) -> None:
         ax.axvspan((o["start_tai_ns"] - t0) / NS_PER_S, (o["end_tai_ns"] - t0) / NS_PER_S, color="0.85", lw=0)
 
 
-def figures(result: TaskResult, params: Params) -> dict[str, Figure]:
+def _seconds(result: TaskResult) -> tuple[np.ndarray, int]:
     att = result.tables["attitude"]
     t0 = int(att["time_tai_ns"][0])
-    ts = (np.asarray(att["time_tai_ns"], dtype=np.int64) - t0) / NS_PER_S
-    out: dict[str, Figure] = {}
-    label = "smoothed" if params.smoother else "filtered"
+    return (np.asarray(att["time_tai_ns"], dtype=np.int64) - t0) / NS_PER_S, t0
 
+
+def _fig_attitude(result: TaskResult, label: str) -> Figure:
+    att = result.tables["attitude"]
+    ts, t0 = _seconds(result)
     fig = Figure(figsize=(10, 7), layout="constrained", label="Attitude angles in the orbital frame (004 figs. 3-7)")
     axes = fig.subplots(3, 1, sharex=True)
     for ax, name, sig in zip(axes, ("roll", "pitch", "yaw"), ("x", "y", "z"), strict=True):
@@ -232,8 +219,12 @@ def figures(result: TaskResult, params: Params) -> dict[str, Figure]:
         ax.grid(alpha=0.3)
     axes[0].legend(loc="upper right", fontsize=8)
     axes[-1].set_xlabel("time since start [s] (grey: no sun sensor)")
-    out["attitude"] = fig
+    return fig
 
+
+def _fig_sigma(result: TaskResult, label: str) -> Figure:
+    att = result.tables["attitude"]
+    ts, t0 = _seconds(result)
     conv = result.summary.get("time_to_converge_s")
     start = conv if conv is not None else 0.0
     m = ts >= start
@@ -249,8 +240,12 @@ def figures(result: TaskResult, params: Params) -> dict[str, Figure]:
         ax.grid(alpha=0.3)
     axes[0].legend(loc="upper right", fontsize=8)
     axes[-1].set_xlabel("time since start [s]")
-    out["attitude_sigma"] = fig
+    return fig
 
+
+def _fig_rates(result: TaskResult) -> Figure:
+    att = result.tables["attitude"]
+    ts, t0 = _seconds(result)
     fig = Figure(figsize=(10, 7), layout="constrained", label="Body rate relative to the orbital frame with ±1σ")
     axes = fig.subplots(3, 1, sharex=True)
     for ax, a in zip(axes, "xyz", strict=True):
@@ -262,9 +257,12 @@ def figures(result: TaskResult, params: Params) -> dict[str, Figure]:
         ax.set_ylabel(f"w_BO {a} [deg/s]")
         ax.grid(alpha=0.3)
     axes[-1].set_xlabel("time since start [s]")
-    out["rates"] = fig
+    return fig
 
+
+def _fig_consistency(result: TaskResult) -> Figure:
     inn = result.tables["innovations"]
+    ts, _ = _seconds(result)
     fig = Figure(figsize=(10, 6), layout="constrained", label="Filter consistency: NIS and innovation whiteness")
     ax1, ax2 = fig.subplots(2, 1)
     nis, dof = np.asarray(inn["nis"], dtype=float), np.asarray(inn["nis_dof"], dtype=float)
@@ -294,8 +292,12 @@ def figures(result: TaskResult, params: Params) -> dict[str, Figure]:
     ax2.set_xlabel("lag [steps]")
     ax2.set_ylabel("autocorrelation")
     ax2.grid(alpha=0.3)
-    out["consistency"] = fig
+    return fig
 
+
+def _fig_disturbance(result: TaskResult) -> Figure:
+    att = result.tables["attitude"]
+    ts, _ = _seconds(result)
     fig = Figure(figsize=(10, 4), layout="constrained", label="Estimated disturbance torque (orbital x, y)")
     ax = fig.add_subplot()
     ax.plot(ts, att["tau_d_x_N_m"], label="τd x_O")
@@ -304,8 +306,14 @@ def figures(result: TaskResult, params: Params) -> dict[str, Figure]:
     ax.set_ylabel("N m")
     ax.legend()
     ax.grid(alpha=0.3)
-    out["disturbance"] = fig
-    return out
+    return fig
+
+
+def figures(result: TaskResult, params: Params) -> dict[str, Figure]:
+    label = "smoothed" if params.smoother else "filtered"
+    return {"attitude": _fig_attitude(result, label), "attitude_sigma": _fig_sigma(result, label),
+            "rates": _fig_rates(result), "consistency": _fig_consistency(result),
+            "disturbance": _fig_disturbance(result)}
 
 
 JOB = JobType(

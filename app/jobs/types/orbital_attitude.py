@@ -55,8 +55,9 @@ class Params(BaseModel):
 
 
 def _sensor(inputs: TaskInputs, wanted: str | None) -> str:
-    cols = inputs.stream("star_tracker")
-    present = sorted(set(np.asarray(cols["sensor"], dtype=object).astype(str).tolist()))
+    present = inputs.sensors("star_tracker")
+    if not present:
+        raise TaskError("no star_tracker samples in the job window")
     if wanted is not None:
         if wanted not in present:
             raise TaskError(f"no star_tracker samples of sensor {wanted!r} in the window (present: "
@@ -88,25 +89,16 @@ def _eop(inputs: TaskInputs) -> tuple[Any, dict[str, Any]]:
 
 def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
     sensor = _sensor(inputs, params.sensor)
-    st = inputs.stream("star_tracker", sensor)
-    gnss = inputs.stream("gnss")
-    if len(set(np.asarray(gnss["sensor"], dtype=object).astype(str).tolist())) > 1:
+    q_BS = inputs.spacecraft.star_tracker_mounting(sensor)
+    st = inputs.star_tracker(sensor)
+    if len(inputs.sensors("gnss")) > 1:
         raise TaskError("several GNSS receivers in the window; the job expects one")
+    gnss = inputs.gnss()
     notes: list[str] = []
-    mount = inputs.config.get("star_trackers", {}).get(sensor)
-    if mount is None:
-        q_BS = np.array([1.0, 0.0, 0.0, 0.0])
-        notes.append(f"no mounting configured for star tracker {sensor!r}: the body frame is taken to be its frame")
-    else:
-        q_BS = np.asarray(mount["q_BS"], dtype=float)
     eop, eop_info = _eop(inputs)
-    t = np.asarray(st["time_tai_ns"], dtype=np.int64)
-    q = np.stack([np.asarray(st[f"q{i}"], dtype=float) for i in range(4)], axis=-1)
-    r_E = np.stack([np.asarray(gnss[c], dtype=float) for c in ("x", "y", "z")], axis=-1)
-    v_E = np.stack([np.asarray(gnss[c], dtype=float) for c in ("vx", "vy", "vz")], axis=-1)
     try:
         res = orbital_attitude(
-            t, q, np.asarray(gnss["time_tai_ns"], dtype=np.int64), r_E, v_E, q_BS=q_BS,
+            st.time_tai_ns, st.q_IS, gnss.time_tai_ns, gnss.r_E_m, gnss.v_E_m_s, q_BS=q_BS,
             inertial_frame=params.inertial_frame, orbital_frame=params.orbital_frame, smoothing=params.smoothing,
             smoothing_frame=params.smoothing_frame, harmonics=params.harmonics, trend_degree=params.trend_degree,
             eop=eop, gnss_method=params.gnss_smoother, segment_max_s=params.segment_max_s,

@@ -7,15 +7,17 @@ tracker, or ``calibrate_alignment`` is true).
 
 What flows between stages:
 
-- **screened data**: when data_screening succeeded, the samples its per-sample flags reject are removed
-  from the inputs of every later stage (see :func:`apply_screening` for the flag tables understood);
+- **screened data**: when data_screening succeeded, the samples its ``flags`` table rejects are removed
+  from the inputs of every later stage, by the runner's own mechanism
+  (:func:`processing.screening.flags.filter_streams`);
 - **calibrations**: when gyro_bias_fit succeeded, its body-frame bias (``w_meas = w_true + b``) is
   removed from the gyro rates given to orbital_attitude (``w_G - R(q_BG)^T b_B``); alignment_calibration
   gets the screened but uncorrected rates, since it estimates the drift itself. The values used are
   listed under ``calibrations`` in the summary.
 
 Progress is weighted by the stages' typical cost; a stage that fails with a task error ends the
-pipeline (or, with ``continue_on_error``, is recorded and the next stage runs). The summary has every
+pipeline (or, with ``continue_on_error``, is recorded and the next stage runs); any other exception is
+an internal error and goes to the runner. The summary has every
 stage's own summary under ``stages.<name>``; tables, files and figures keep their names, prefixed with
 the stage (``gyro_bias_fit__residuals.csv``), so the standard job report is the combined report.
 """
@@ -33,6 +35,8 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from app.jobs.registry import JobType
 from processing.attitude import rotations
+from processing.screening.flags import filter_streams
+from processing.spacecraft import Spacecraft
 from processing.streams import STREAMS
 from processing.tasks import Progress, TaskError, TaskInputs, TaskResult
 
@@ -95,7 +99,7 @@ def plan(inputs: TaskInputs, params: Params, available: Mapping[str, JobType]) -
         notes.append(f"stages not available in this installation: {', '.join(missing)}")
     calibrate = params.calibrate_alignment
     if calibrate is None:
-        calibrate = bool(inputs.config.get("gyro")) and bool(inputs.config.get("star_trackers"))
+        calibrate = inputs.spacecraft.has_gyro and bool(inputs.spacecraft.star_trackers)
         if not calibrate and "alignment_calibration" in available and params.stages is None:
             notes.append("alignment_calibration skipped: the configuration has no gyro and star tracker pair")
     order = [s for s in STAGE_NAMES if s in wanted and s in available
@@ -116,84 +120,30 @@ def _stage_inputs(inputs: TaskInputs, streams: Mapping[str, Mapping[str, NDArray
     if jt.any_stream and not present:
         return "no telemetry in the window"
     reference = {k: v for k, v in inputs.reference.items() if k in jt.reference}
-    return TaskInputs(streams=present, config=inputs.config, start_tai_ns=inputs.start_tai_ns,
+    return TaskInputs(streams=present, spacecraft=inputs.spacecraft, start_tai_ns=inputs.start_tai_ns,
                       end_tai_ns=inputs.end_tai_ns, reference=reference)
-
-
-def _flag_column(table: Mapping[str, NDArray[Any]]) -> NDArray[np.bool_] | None:
-    """Rejected-sample mask of a flags table: ``rejected`` true, or ``ok``/``valid``/``accepted`` false."""
-    for name in ("rejected", "reject", "flagged"):
-        if name in table:
-            return np.asarray(table[name]).astype(bool)
-    for name in ("ok", "valid", "accepted"):
-        if name in table:
-            return ~np.asarray(table[name]).astype(bool)
-    return None
 
 
 def apply_screening(streams: Mapping[str, Mapping[str, NDArray[Any]]],
                     result: TaskResult) -> tuple[dict[str, dict[str, NDArray[Any]]], dict[str, int]]:
-    """Remove the samples a screening result rejects.
+    """Remove the samples data_screening's ``flags`` table rejects, with the runner's mechanism
+    (:func:`processing.screening.flags.filter_streams`: rows matched by stream, sensor, key and time).
 
-    data_screening's ``flags`` table (time_tai_ns, stream, sensor, key, accepted) goes through its own
-    :func:`processing.screening.flags.filter_streams`. Otherwise understood (per-sample, keyed by time and,
-    when present, sensor): one table ``flags`` with a ``stream`` column, or per-stream tables
-    ``<stream>_flags`` / ``flags_<stream>`` / ``<stream>``; each with ``time_tai_ns`` and ``rejected`` (or
-    ``ok``/``valid``/``accepted``). Returns the screened streams and the removed samples per stream.
-    """
-    combined = result.tables.get("flags")
-    if combined is not None and {"stream", "key", "accepted"} <= set(combined):
-        try:  # data_screening's own filter (matches panel/satellite keys too)
-            from processing.screening.flags import filter_streams
-        except ImportError:
-            pass
-        else:
-            screened = filter_streams(streams, combined)
-            counts = {n: len(streams[n]["time_tai_ns"]) - len(screened[n]["time_tai_ns"] if n in screened else ())
-                      for n in streams}
-            return screened, {n: c for n, c in counts.items() if c}
-    out = {k: dict(v) for k, v in streams.items()}
-    removed: dict[str, int] = {}
-    per_stream: dict[str, list[Mapping[str, NDArray[Any]]]] = {}
-    if combined is not None and "stream" in combined:
-        stream_col = np.asarray(combined["stream"]).astype(str)
-        for name in set(stream_col.tolist()):
-            mask = stream_col == name
-            per_stream.setdefault(name, []).append({k: np.asarray(v)[mask] for k, v in combined.items()})
-    for name in streams:
-        for key in (f"{name}_flags", f"flags_{name}", name):
-            if key in result.tables:
-                per_stream.setdefault(name, []).append(result.tables[key])
-    for name, tables in per_stream.items():
-        if name not in out:
-            continue
-        cols = out[name]
-        t = np.asarray(cols["time_tai_ns"], dtype=np.int64)
-        sensors = np.asarray(cols["sensor"]).astype(str) if "sensor" in cols else np.full(t.shape, "")
-        drop = np.zeros(t.shape, dtype=bool)
-        for table in tables:
-            rejected = _flag_column(table)
-            if rejected is None or "time_tai_ns" not in table:
-                continue
-            rt = np.asarray(table["time_tai_ns"], dtype=np.int64)[rejected]
-            if "sensor" in table:
-                rs = np.asarray(table["sensor"]).astype(str)[rejected]
-                keys = set(zip(rs.tolist(), rt.tolist(), strict=True))
-                drop |= np.fromiter(((s, x) in keys for s, x in zip(sensors.tolist(), t.tolist(), strict=True)),
-                                    dtype=bool, count=t.size)
-            else:
-                drop |= np.isin(t, rt)
-        if drop.any():
-            out[name] = {k: np.asarray(v)[~drop] for k, v in cols.items()}
-            removed[name] = int(drop.sum())
-    return out, removed
+    Returns the screened streams and the removed samples per stream (streams without removals left
+    out); without a ``flags`` table nothing is removed."""
+    flags = result.tables.get("flags")
+    if flags is None:
+        return {k: dict(v) for k, v in streams.items()}, {}
+    screened = filter_streams(streams, flags)
+    removed = {n: len(cols["time_tai_ns"]) - (len(screened[n]["time_tai_ns"]) if n in screened else 0)
+               for n, cols in streams.items()}
+    return screened, {n: c for n, c in removed.items() if c}
 
 
 def correct_gyro_bias(gyro: Mapping[str, NDArray[Any]], bias_B: NDArray[np.float64],
-                      config: Mapping[str, Any]) -> dict[str, NDArray[Any]]:
+                      spacecraft: Spacecraft) -> dict[str, NDArray[Any]]:
     """Gyro rates in the gyro frame with a body-frame bias removed: w_G - R(q_BG)^T b_B (rad/s)."""
-    q_BG = np.asarray((config.get("gyro") or {}).get("q_BG", [1.0, 0.0, 0.0, 0.0]), dtype=np.float64)
-    b_G = rotations.quat_rotate(rotations.quat_conjugate(rotations.quat_normalize(q_BG)), bias_B)
+    b_G = rotations.quat_rotate(rotations.quat_conjugate(spacecraft.gyro_mounting()), bias_B)
     out = dict(gyro)
     for i, c in enumerate(("wx", "wy", "wz")):
         out[c] = np.asarray(gyro[c], dtype=np.float64) - b_G[i]
@@ -246,7 +196,7 @@ def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
         stage_progress(0.0, "starting")
         try:
             result = jt.run(stage_inputs, stage_params[name], stage_progress)
-        except (TaskError, ValueError) as exc:  # JobCancelled and crashes propagate to the runner
+        except TaskError as exc:  # JobCancelled and crashes (a ValueError included) propagate to the runner
             stages[name] = {"status": "failed", "error": str(exc) or type(exc).__name__}
             if not params.continue_on_error:
                 raise TaskError(f"pipeline stage {name} failed: {exc}") from exc
@@ -268,7 +218,7 @@ def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
         if name == "gyro_bias_fit" and params.apply_gyro_bias and "gyro" in streams:
             bias = _bias_from(result.summary)
             if bias is not None:
-                raw_gyro_bias_free = correct_gyro_bias(streams["gyro"], bias, inputs.config)
+                raw_gyro_bias_free = correct_gyro_bias(streams["gyro"], bias, inputs.spacecraft)
                 calibrations["gyro_bias_rad_s"] = bias.tolist()
                 calibrations["gyro_bias_applied_to"] = [s for s in BIAS_CORRECTED_STAGES if s in order]
     summary: dict[str, Any] = {

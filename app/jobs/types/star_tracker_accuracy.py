@@ -42,46 +42,34 @@ def _as_list(values: Any, scale: float = 1.0) -> list[float | None]:
 
 
 def _pick_sensor(inputs: TaskInputs, requested: str | None) -> tuple[str, np.ndarray]:
-    configured = dict(inputs.config.get("star_trackers") or {})
-    present = sorted(set(np.asarray(inputs.stream("star_tracker")["sensor"]).astype(str).tolist()))
+    configured = inputs.spacecraft.star_tracker_names
+    present = inputs.sensors("star_tracker")
+    if not present:
+        raise TaskError("no star_tracker samples in the job window")
     if requested is not None:
         sensor = requested
     elif len(configured) == 1:
-        sensor = next(iter(configured))
+        sensor = configured[0]
     elif len(present) == 1:
         sensor = present[0]
     else:
         raise TaskError(
             f"params.sensor is required: the star tracker is ambiguous (configured: {sorted(configured) or 'none'}, "
-            f"in the data: {present})"
+            f"in the data: {list(present)})"
         )
-    mounting = (configured.get(sensor) or {}).get("q_BS")
-    if mounting is None:
-        raise TaskError(
-            f"no mounting q_BS configured for star tracker {sensor!r} (configured: {sorted(configured) or 'none'}); "
-            "add star_trackers.<name>.q_BS to the spacecraft configuration"
-        )
-    q_BS = np.asarray(mounting, dtype=float)
-    if q_BS.shape != (4,) or not np.all(np.isfinite(q_BS)) or np.linalg.norm(q_BS) < 0.5:
-        raise TaskError(f"star_trackers.{sensor}.q_BS must be 4 finite numbers of unit norm, got {mounting!r}")
-    return sensor, q_BS
+    return sensor, inputs.spacecraft.star_tracker_mounting(sensor)
 
 
 def _gyro(inputs: TaskInputs, notes: list[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-    cols = inputs.streams.get("gyro")
-    if cols is None or len(cols["time_tai_ns"]) == 0:
+    sensors = inputs.sensors("gyro")
+    if not sensors:
         notes.append("no gyro samples in the window: real motion not separated from sensor noise")
         return None
-    sensors = sorted(set(np.asarray(cols["sensor"]).astype(str).tolist()))
     if len(sensors) > 1:
-        notes.append(f"several gyro sensors {sensors}: used {sensors[0]!r}")
-    g = inputs.stream("gyro", sensors[0])
-    order = np.argsort(np.asarray(g["time_tai_ns"], dtype=np.int64), kind="stable")
-    t = np.asarray(g["time_tai_ns"], dtype=np.int64)[order]
-    keep = np.concatenate([[True], np.diff(t) > 0])
-    w = np.column_stack([np.asarray(g[c], dtype=float)[order] for c in ("wx", "wy", "wz")])
-    q_BG = np.asarray((inputs.config.get("gyro") or {}).get("q_BG", [1.0, 0.0, 0.0, 0.0]), dtype=float)
-    return t[keep], w[keep], q_BG
+        notes.append(f"several gyro sensors {list(sensors)}: used {sensors[0]!r}")
+    g = inputs.gyro(sensors[0])
+    keep = np.concatenate([[True], np.diff(g.time_tai_ns) > 0])
+    return g.time_tai_ns[keep], g.w_G_rad_s[keep], inputs.spacecraft.gyro_mounting()
 
 
 def _line_entry(line: Any) -> dict[str, Any]:
@@ -181,10 +169,8 @@ def _tables(r: StarTrackerAccuracy) -> dict[str, dict[str, np.ndarray]]:
 def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
     progress(0.02, "loading")
     sensor, q_BS = _pick_sensor(inputs, params.sensor)
-    st = inputs.stream("star_tracker", sensor)
-    order = np.argsort(np.asarray(st["time_tai_ns"], dtype=np.int64), kind="stable")
-    t = np.asarray(st["time_tai_ns"], dtype=np.int64)[order]
-    q = np.column_stack([np.asarray(st[f"q{i}"], dtype=float)[order] for i in range(4)])
+    st = inputs.star_tracker(sensor)
+    t, q = st.time_tai_ns, st.q_IS
     keep = np.concatenate([[True], np.diff(t) > 0])
     notes: list[str] = []
     if not np.all(keep):

@@ -52,7 +52,7 @@ class Params(BaseModel):
     antenna_method: Literal["eq7", "cone"] = Field(
         "cone", description="eq7: the paper's least squares; cone: eq. 7 refined by a cone fit (eq. 5)")
     cone_half_angle_deg: float | None = Field(
-        None, gt=0, lt=180, description="antenna cone of eq. 5; default gnss_antenna_cone_half_angle_deg or 80")
+        None, gt=0, lt=180, description="antenna cone of eq. 5; default 80")
     screen: bool = Field(True, description="reject samples with the data_screening criteria (default thresholds)")
 
 
@@ -81,13 +81,13 @@ def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
     rejected: dict[str, int] = {}
     if params.screen:
         progress(0.1, "screening")
-        screening = screen(inputs.streams, inputs.config, ScreeningParams(), nav=nav,
+        screening = screen(inputs.streams, inputs.spacecraft, ScreeningParams(), nav=nav,
                            selected=[s for s in ("gnss", "magnetometer", "panel_currents", "gnss_visibility")
                                      if s in inputs.streams])
         rejected = {s: int(screening.rejected(s).sum()) for s in screening.n_rows}
     progress(0.3, "vector observations")
     try:
-        obs = observations(inputs.streams, inputs.config, vp, nav=nav, screening=screening)
+        obs = observations(inputs.streams, inputs.spacecraft, vp, nav=nav, screening=screening)
         progress(0.7, "attitude")
         res = vector_attitude(obs, vp)
     except VectorAttitudeError as exc:

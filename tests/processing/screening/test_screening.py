@@ -13,6 +13,7 @@ from processing.frames.earth_orientation import gcrs_to_itrs_state
 from processing.screening import criteria as scr
 from processing.screening.flags import accepted_mask, filter_streams, flags_table
 from processing.simulate.seed002 import simulate_seed002
+from processing.spacecraft import MissingMountingError, Spacecraft
 from tests.real_data import GNSS_NAV
 
 NAV = GNSS_NAV / "brdc2800.15n"
@@ -30,7 +31,7 @@ def nav():
 @cache
 def screened(seed: int):
     sc = simulate_seed002(nav=nav(), seed=seed, duration_s=3000.0)
-    return sc, scr.screen(sc.streams, sc.config, nav=nav())
+    return sc, scr.screen(sc.streams, Spacecraft.from_json(sc.config), nav=nav())
 
 
 def test_done_when_recall_and_false_flags() -> None:
@@ -90,14 +91,15 @@ def test_j2_aware_energy_against_two_body() -> None:
              **{c: tr.r_E[:, i] for i, c in enumerate("xyz")}, **{c: tr.v_E[:, i] for i, c in enumerate(("vx", "vy",
                                                                                                        "vz"))}}
     p2 = scr.ScreeningParams(energy_model="two_body", energy_model_error_m2_s2=300.0)
-    res2 = scr.screen({"gnss": clean}, {}, p2)
-    resj = scr.screen({"gnss": clean}, {}, scr.ScreeningParams())
+    res2 = scr.screen({"gnss": clean}, Spacecraft(), p2)
+    resj = scr.screen({"gnss": clean}, Spacecraft(), scr.ScreeningParams())
     energy2 = next(c for c in res2.criteria if c.name == "energy")
     energyj = next(c for c in resj.criteria if c.name == "energy")
     assert energy2.flagged.mean() > 0.3
     assert not energyj.flagged.any() and np.max(energyj.statistic) < 100.0
     # default two-body tolerance includes the J2 oscillation: nothing flagged either
-    assert not next(c for c in scr.screen({"gnss": clean}, {}, scr.ScreeningParams(energy_model="two_body")).criteria
+    assert not next(c for c in scr.screen({"gnss": clean}, Spacecraft(),
+                                          scr.ScreeningParams(energy_model="two_body")).criteria
                     if c.name == "energy").flagged.any()
     # reference orbit in ITRF and in GCRS: the statistic is the GNSS noise only
     ref_E = {"time_tai_ns": tr.time_tai_ns[::30], **{c: tr.r_E[::30, i] for i, c in enumerate("xyz")},
@@ -105,7 +107,7 @@ def test_j2_aware_energy_against_two_body() -> None:
     ref_I = {"time_tai_ns": tr.time_tai_ns[::30], **{c: tr.r_I[::30, i] for i, c in enumerate("xyz")},
              **{c: tr.v_I[::30, i] for i, c in enumerate(("vx", "vy", "vz"))}}
     for ref, frame in ((ref_E, "ITRF"), (ref_I, "GCRF")):
-        res = scr.screen({"gnss": clean}, {}, reference_orbit=ref, reference_frame=frame)
+        res = scr.screen({"gnss": clean}, Spacecraft(), reference_orbit=ref, reference_frame=frame)
         stat = next(c for c in res.criteria if c.name == "energy").statistic
         assert np.nanmax(stat) < 60.0, frame
 
@@ -167,13 +169,14 @@ def test_star_tracker_jumps_against_gyro() -> None:
     gyro = {"time_tai_ns": (tg * 1e9).astype(np.int64), "sensor": np.full(tg.size, "gyro", dtype=object),
             **{c: w[i] + 1e-7 * np.random.default_rng(i).normal(size=tg.size) for i, c in enumerate(("wx", "wy",
                                                                                                       "wz"))}}
-    res = scr.screen({"star_tracker": st, "gyro": gyro}, {"star_trackers": {"st1": {"q_BS": [1, 0, 0, 0]}}})
+    res = scr.screen({"star_tracker": st, "gyro": gyro},
+                     Spacecraft.from_json({"star_trackers": {"st1": {"q_BS": [1, 0, 0, 0]}}}))
     jump = next(c for c in res.criteria if c.stream == "star_tracker" and c.name == "quaternion_jump")
     assert np.flatnonzero(jump.flagged).tolist() == [150]
     assert res.rejected("gyro").sum() == 0
     assert "no GNSS stream" in " ".join(res.notes)
     exact = dict(gyro, wx=np.full(tg.size, w[0]), wy=np.full(tg.size, w[1]), wz=np.full(tg.size, w[2]))
-    stuck = scr.screen({"gyro": exact}, {})  # a real gyro never repeats its noise exactly
+    stuck = scr.screen({"gyro": exact}, Spacecraft())  # a real gyro never repeats its noise exactly
     assert next(c for c in stuck.criteria if c.name == "stuck").flagged.sum() == tg.size - 1
 
 
@@ -190,7 +193,23 @@ def test_sparse_gnss_is_not_flagged(step: int) -> None:
     r[bad] += np.array([3000.0, -2000.0, 1000.0])
     g = {"time_tai_ns": t, "sensor": np.full(t.size, "gnss", dtype=object),
          **{c: r[:, i] for i, c in enumerate("xyz")}, **{c: v[:, i] for i, c in enumerate(("vx", "vy", "vz"))}}
-    res = scr.screen({"gnss": g}, {})
+    res = scr.screen({"gnss": g}, Spacecraft())
     rej = res.rejected("gnss")
     assert rej[bad].all()
     assert rej.sum() - bad.size <= max(1, 0.01 * t.size)
+
+
+def test_star_tracker_against_gyro_needs_its_mounting() -> None:
+    """The jump test against the gyro rotates the rates into the tracker frame: a tracker without a
+    configured mounting is an error naming it (it used to get an identity mounting silently)."""
+    t = np.arange(0, 20, 1.0)
+    st = {"time_tai_ns": (t * 1e9).astype(np.int64), "sensor": np.full(t.size, "st2", dtype=object),
+          "q0": np.ones(t.size), "q1": np.zeros(t.size), "q2": np.zeros(t.size), "q3": np.zeros(t.size)}
+    gyro = {"time_tai_ns": (t * 1e9).astype(np.int64), "sensor": np.full(t.size, "gyro", dtype=object),
+            "wx": np.zeros(t.size), "wy": np.zeros(t.size), "wz": np.zeros(t.size)}
+    config = Spacecraft.from_json({"star_trackers": {"st1": {"q_BS": [1, 0, 0, 0]}}})
+    with pytest.raises(MissingMountingError, match=r"star tracker 'st2' is not in the spacecraft configuration "
+                                                   r"\(configured: st1\)"):
+        scr.screen({"star_tracker": st, "gyro": gyro}, config)
+    without_gyro = scr.screen({"star_tracker": st}, config)  # against max_rate_rad_s: no mounting needed
+    assert without_gyro.n_rows == {"star_tracker": t.size}

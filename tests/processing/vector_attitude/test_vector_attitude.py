@@ -12,6 +12,7 @@ from processing.attitude import rotations
 from processing.formats.rinex_nav import parse_rinex_nav
 from processing.screening import criteria as screening
 from processing.simulate.seed002 import simulate_seed002
+from processing.spacecraft import MissingMountingError, Spacecraft
 from processing.vector_attitude import determination as va
 from tests.real_data import GNSS_NAV
 
@@ -30,13 +31,14 @@ def nav():
 @cache
 def scenario(seed: int, duration_s: float):
     sc = simulate_seed002(nav=nav(), seed=seed, duration_s=duration_s)
-    return sc, screening.screen(sc.streams, sc.config, nav=nav())
+    return sc, screening.screen(sc.streams, Spacecraft.from_json(sc.config), nav=nav())
 
 
 @cache
 def observed(seed: int = 5, duration_s: float = 5800.0):
     sc, scr = scenario(seed, duration_s)
-    return sc, va.observations(sc.streams, sc.config, SCENARIO_PARAMS, nav=nav(), screening=scr)
+    return sc, va.observations(sc.streams, Spacecraft.from_json(sc.config), SCENARIO_PARAMS, nav=nav(),
+                               screening=scr)
 
 
 def solved(method: str = "auto"):
@@ -89,8 +91,8 @@ def test_select_methods_truth_table() -> None:
 def _run(streams, config, seed: int = 2, duration_s: float = 1800.0, method: str = "auto"):
     sc, _ = scenario(seed, duration_s)
     p = va.VectorAttitudeParams(**{**SCENARIO_PARAMS.__dict__, "method": method})
-    scr = screening.screen(streams, config, nav=nav())
-    obs = va.observations(streams, config, p, nav=nav(), screening=scr)
+    scr = screening.screen(streams, Spacecraft.from_json(config), nav=nav())
+    obs = va.observations(streams, Spacecraft.from_json(config), p, nav=nav(), screening=scr)
     return sc, obs, va.vector_attitude(obs, p)
 
 
@@ -116,11 +118,12 @@ def test_selection_when_streams_are_missing() -> None:
     assert np.mean(res.method[lit] == "q_method") > 0.95 and np.all(res.method[shadow] == "none")
     # no navigation data: no antenna vector
     p = SCENARIO_PARAMS
-    obs = va.observations(full, sc.config, p, nav=None)
+    obs = va.observations(full, Spacecraft.from_json(sc.config), p, nav=None)
     assert not obs.available[:, 0].any() and obs.why[0, 0] == "no navigation data (rinex_nav)"
     # no GNSS: no orbital frame, no models
     with pytest.raises(va.VectorAttitudeError, match="needs the GNSS stream"):
-        va.observations({k: v for k, v in full.items() if k != "gnss"}, sc.config, p, nav=nav())
+        va.observations({k: v for k, v in full.items() if k != "gnss"}, Spacecraft.from_json(sc.config), p,
+                        nav=nav())
 
 
 def test_rejected_samples_are_not_used() -> None:
@@ -137,7 +140,7 @@ def test_rejected_samples_are_not_used() -> None:
     assert np.mean(res.method[k[lit]] == "q_method") > 0.8
     # without the screening the spikes enter the solution, whose error then breaks the noise bound
     p = SCENARIO_PARAMS
-    raw = va.vector_attitude(va.observations(sc.streams, sc.config, p, nav=nav()), p)
+    raw = va.vector_attitude(va.observations(sc.streams, Spacecraft.from_json(sc.config), p, nav=nav()), p)
     err_raw, _ = va.attitude_errors(raw, t.q_OB)
     assert raw.used[k, 1].all()
     assert np.mean(err_raw[k] > raw.bound_rad()[k]) > 0.5
@@ -151,7 +154,8 @@ def test_dipole_field_model_of_eq2() -> None:
     sc, obs = observed()
     p = va.VectorAttitudeParams(**{**SCENARIO_PARAMS.__dict__, "field_model": "dipole",
                                    "field_model_error_nT": 4000.0})
-    obs_d = va.observations(sc.streams, sc.config, p, nav=nav(), time_tai_ns=obs.time_tai_ns[::20])
+    obs_d = va.observations(sc.streams, Spacecraft.from_json(sc.config), p, nav=nav(),
+                            time_tai_ns=obs.time_tai_ns[::20])
     igrf = obs.r_O[::20, 1]
     both = np.isfinite(obs_d.r_O[:, 1]).all(axis=1) & np.isfinite(igrf).all(axis=1)
     ang = np.degrees(np.arccos(np.clip(np.sum(obs_d.r_O[both, 1] * igrf[both], axis=1), -1, 1)))
@@ -159,3 +163,13 @@ def test_dipole_field_model_of_eq2() -> None:
     res = va.vector_attitude(obs_d, p)
     err, _ = va.attitude_errors(res, sc.truth.q_OB[::20])
     assert 0.5 < np.nanmedian(np.degrees(err)) < 20.0
+
+
+@pytest.mark.parametrize("key, sensor", [("magnetometer", "the magnetometer"),
+                                         ("gnss_antenna_axis_B", "the GNSS antenna axis")])
+def test_a_vector_without_its_mounting_is_an_error_naming_the_sensor(key: str, sensor: str) -> None:
+    """No identity q_BM and no [1, 0, 0] antenna axis when the configuration lacks them."""
+    sc, _ = scenario(2, 1800.0)
+    config = Spacecraft.from_json({k: v for k, v in sc.config.items() if k != key})
+    with pytest.raises(MissingMountingError, match=f"{sensor} is not in the spacecraft configuration"):
+        va.observations(sc.streams, config, SCENARIO_PARAMS, nav=nav())

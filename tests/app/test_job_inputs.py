@@ -1,0 +1,138 @@
+"""The typed input boundary in the runner: the stored configuration becomes a processing Spacecraft once,
+a pinned gyro calibration gives a new one with an identity gyro mounting (the stored one unchanged), and a
+failure is either a deliberate input error (its message) or an internal error (logged with its traceback)."""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+import pytest
+from pydantic import BaseModel, ConfigDict
+
+from app.config_schema import SpacecraftConfig
+from app.jobs import runner
+from app.jobs.inputs import spacecraft_from_config, spacecraft_from_stored
+from app.jobs.registry import JobType
+from processing.spacecraft import Spacecraft
+from processing.tasks import TaskError, TaskInputs, TaskResult
+from storage.calibrations import add_version
+from storage.db import make_engine, session_factory
+from storage.models import Job
+from tests.app.helpers import make_spacecraft
+
+S = 2 ** -0.5
+CONFIG = {
+    "star_trackers": {"st1": {"q_BS": [S, 0.0, S, 0.0]}, "st2": {"q_BS": [1, 0, 0, 0]}},
+    "gyro": {"q_BG": [0.0, 0.0, 0.0, 1.0]},
+    "magnetometer": {"q_BM": [0.5, 0.5, 0.5, 0.5]},
+    "solar_panels": [{"normal_B": [1, 0, 0], "max_current_a": 1.2}, {"normal_B": [0, 1, 0], "max_current_a": 1.1}],
+    "gnss_antenna_axis_B": [0, 0, -1],
+    "inertia_kg_m2": [[51.44, 0, 0], [0, 51.48, 0], [0, 0, 0.76]],
+}
+START = 1_700_000_000 * 10**9
+
+
+def _same(a: Spacecraft, b: Spacecraft) -> None:
+    assert a.star_tracker_names == b.star_tracker_names
+    for name in a.star_tracker_names:
+        np.testing.assert_array_equal(a.star_tracker_mounting(name), b.star_tracker_mounting(name))
+    for method in ("gyro_mounting", "magnetometer_mounting", "antenna_axis_B", "panel_normals_B",
+                   "panel_max_current_a"):
+        np.testing.assert_array_equal(getattr(a, method)(), getattr(b, method)())
+    np.testing.assert_array_equal(a.inertia_kg_m2, b.inertia_kg_m2)
+    assert (a.sun_sensor_q_BS is None) == (b.sun_sensor_q_BS is None)
+
+
+def test_the_validated_configuration_becomes_the_processing_spacecraft() -> None:
+    typed = spacecraft_from_config(SpacecraftConfig.model_validate(CONFIG))
+    _same(typed, Spacecraft.from_json(CONFIG))
+    np.testing.assert_allclose(typed.star_tracker_mounting("st1"), [S, 0.0, S, 0.0], rtol=0, atol=1e-16)
+    with pytest.raises(TaskError, match=r"the sun sensor is not in the spacecraft configuration"):
+        typed.sun_sensor_mounting()
+    assert spacecraft_from_stored(None).star_tracker_names == () and not spacecraft_from_stored({}).has_gyro
+    with pytest.raises(TaskError, match=r"(?s)spacecraft configuration version 3 is not valid: .*q_BS"):
+        spacecraft_from_stored({"star_trackers": {"st1": {"q_BS": [2, 0, 0, 0]}}}, 3)
+
+
+class NoParams(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+def seen(inputs: TaskInputs, params: NoParams, progress) -> TaskResult:  # noqa: ANN001
+    sc = inputs.spacecraft
+    return TaskResult(summary={"q_BS": sc.star_tracker_mounting("st1").tolist(), "q_BG": sc.gyro_mounting().tolist(),
+                               "panels": len(sc.solar_panels)})
+
+
+def input_error(inputs: TaskInputs, params: NoParams, progress) -> TaskResult:  # noqa: ANN001
+    inputs.spacecraft.star_tracker_mounting("st9")
+    raise AssertionError("unreachable")
+
+
+def bug(inputs: TaskInputs, params: NoParams, progress) -> TaskResult:  # noqa: ANN001
+    raise ValueError("operands could not be broadcast together")
+
+
+JOBS = {name: JobType(name=name, title=name, paper="", params=NoParams, run=run, applies_calibration=calibration)
+        for name, run, calibration in (("seen", seen, None), ("calibrated", seen, "gyro"),
+                                       ("input_error", input_error, None), ("bug", bug, None))}
+
+
+@pytest.fixture
+def jobs(client, settings, monkeypatch):
+    """Runs a job of the types above through the real runner; returns (state, error, summary)."""
+    monkeypatch.setattr(runner, "registry", lambda: JOBS)
+    make_spacecraft(client, "sat1", CONFIG)
+    engine = make_engine(settings.database_url)
+    sessions = session_factory(engine)
+
+    def run(job_type: str, reference: dict | None = None) -> tuple[str, str | None, dict | None]:
+        job_id = f"job-{job_type}"
+        with sessions.begin() as session:  # claimed already: the executor leaves it to us
+            session.add(Job(id=job_id, type=job_type, spacecraft_id=1, config_version=1, start_tai_ns=START,
+                            end_tai_ns=START + 10**12, params={}, status="running", stage="starting", progress=0.0,
+                            software_version="test", cancel_requested=False, reference=reference or {}))
+        state = runner.execute(job_id, settings)
+        with sessions() as session:
+            job = session.get(Job, job_id)
+            assert job is not None and job.status == state
+            return state, job.error, (job.result or {}).get("summary")
+
+    run.sessions = sessions  # type: ignore[attr-defined]
+    yield run
+    engine.dispose()
+
+
+def test_the_runner_gives_the_task_the_typed_configuration(jobs) -> None:
+    state, error, summary = jobs("seen")
+    assert state == "succeeded", error
+    np.testing.assert_allclose(summary["q_BS"], [S, 0.0, S, 0.0], rtol=0, atol=1e-16)
+    assert summary["q_BG"] == [0.0, 0.0, 0.0, 1.0] and summary["panels"] == 2
+
+
+def test_a_pinned_gyro_calibration_gives_an_identity_gyro_mounting(jobs) -> None:
+    with jobs.sessions.begin() as session:
+        cal = add_version(session, 1, "gyro", {"q_BG": [1.0, 0.0, 0.0, 0.0], "scale_factor_error": 0.0,
+                                               "drift_rad_s": [0.0, 0.0, 0.0]}, None)
+        cal_id = cal.id
+    state, error, summary = jobs("calibrated", {"calibration:gyro": cal_id})
+    assert state == "succeeded", error
+    assert summary["q_BG"] == [1.0, 0.0, 0.0, 0.0]
+    state, error, summary = jobs("seen")  # the stored configuration keeps its mounting
+    assert summary["q_BG"] == [0.0, 0.0, 0.0, 1.0]
+
+
+def test_input_errors_fail_with_their_message_other_errors_are_internal_and_logged(jobs, caplog) -> None:
+    with caplog.at_level(logging.ERROR, logger="attitude.jobs"):
+        state, error, _ = jobs("input_error")
+    assert state == "failed"
+    assert error == ("star tracker 'st9' is not in the spacecraft configuration (configured: st1, st2); "
+                     "add star_trackers.st9.q_BS")
+    assert not caplog.records
+    with caplog.at_level(logging.ERROR, logger="attitude.jobs"):
+        state, error, _ = jobs("bug")
+    assert state == "failed"
+    assert error == "internal error: ValueError: operands could not be broadcast together"
+    logged = "\n".join(r.getMessage() for r in caplog.records)
+    assert "job job-bug crashed" in logged and "Traceback" in logged and "in bug" in logged
