@@ -14,7 +14,7 @@ from fastapi.responses import JSONResponse
 from sqlalchemy import text
 
 from app.api.deps import RejectUnknownQuery
-from app.api.errors import COMMON_ERRORS
+from app.api.errors import COMMON_ERRORS, handle_service_errors
 from app.api.middleware import BodyLimitMiddleware, RateLimiter, SecurityHeadersMiddleware
 from app.api.routes import exports, jobs, keys, reference, schedules, spacecraft, telemetry
 from app.jobs.dask_executor import make_executor
@@ -77,6 +77,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
                            allow_headers=["Authorization", "Content-Type"])
     app.add_middleware(SecurityHeadersMiddleware)
     app.add_middleware(BodyLimitMiddleware, limit=settings.max_upload_bytes)
+
+    handle_service_errors(app)  # refusals of app/services (app/services/errors.py) -> 4xx
 
     @app.exception_handler(RequestValidationError)
     async def _validation(_: Request, exc: RequestValidationError) -> JSONResponse:

@@ -1,9 +1,9 @@
-"""Request dependencies: the catalog session, the telemetry store, the authenticated caller."""
+"""Request dependencies: the catalog session, the telemetry store, the settings, the authenticated caller
+(:class:`app.services.access.Principal`)."""
 
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass
 from typing import Annotated, Any
 
 from fastapi import Depends, HTTPException, Request, status
@@ -11,22 +11,10 @@ from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 from sqlalchemy.orm import Session
 
 from app.api.middleware import retry_after_header
+from app.services.access import Principal, identify
 from app.settings import Settings
-from storage.keys import find_active, granted_spacecraft, role_at_least
+from storage.keys import role_at_least
 from storage.parquet_store import ParquetStore
-
-
-@dataclass(frozen=True)
-class Principal:
-    """The caller: its key, role and the spacecraft it may use (None: all)."""
-
-    key_id: str
-    name: str
-    role: str
-    spacecraft_ids: frozenset[int] | None = None
-
-    def may_use(self, spacecraft_id: int) -> bool:
-        return self.spacecraft_ids is None or spacecraft_id in self.spacecraft_ids
 
 
 def get_session(request: Request) -> Iterator[Session]:
@@ -57,11 +45,10 @@ def _authenticate(request: Request,
         raise HTTPException(status.HTTP_401_UNAUTHORIZED, "missing API key (Authorization: Bearer <key>)",
                             headers={"WWW-Authenticate": "Bearer"})
     with request.app.state.sessions() as session:
-        key = find_active(session, credentials.credentials)
-        if key is None:
-            raise HTTPException(status.HTTP_401_UNAUTHORIZED, "invalid, expired or revoked API key",
-                                headers={"WWW-Authenticate": "Bearer"})
-        principal = Principal(key.id, key.name, key.role, granted_spacecraft(key))
+        principal = identify(session, credentials.credentials)
+    if principal is None:
+        raise HTTPException(status.HTTP_401_UNAUTHORIZED, "invalid, expired or revoked API key",
+                            headers={"WWW-Authenticate": "Bearer"})
     wait = request.app.state.rate_limiter.acquire(principal.key_id)
     if wait > 0:
         raise HTTPException(status.HTTP_429_TOO_MANY_REQUESTS,

@@ -1,10 +1,15 @@
-"""The shape of error answers (4xx), declared in the OpenAPI schema of every route."""
+"""Error answers (4xx): their shape, declared in the OpenAPI schema of every route, and the status of
+each refusal of the service layer."""
 
 from __future__ import annotations
 
 from typing import Any
 
+from fastapi import FastAPI, Request
+from fastapi.responses import JSONResponse
 from pydantic import BaseModel, ConfigDict
+
+from app.services.errors import Conflict, Gone, Invalid, NotFound, ServiceError, TooLarge, Unsupported
 
 
 class ErrorItem(BaseModel):
@@ -30,3 +35,24 @@ def error_responses(*codes: int) -> dict[int | str, dict[str, Any]]:
 
 # What any authenticated /api/v1 route may answer besides its own results.
 COMMON_ERRORS = error_responses(400, 401, 403, 404, 409, 413, 415, 422, 429, 500, 503, 507)
+
+
+# The HTTP status of each refusal of the service layer (app/services/errors.py); the UI shows the same.
+SERVICE_STATUS: dict[type[ServiceError], int] = {NotFound: 404, Conflict: 409, Gone: 410, TooLarge: 413,
+                                                 Unsupported: 415, Invalid: 422}
+
+
+def http_status(exc: ServiceError) -> int:
+    """The status answering ``exc`` (by its class or nearest base; 400 for other refusals)."""
+    return next((SERVICE_STATUS[c] for c in type(exc).__mro__ if c in SERVICE_STATUS), 400)
+
+
+async def service_error_handler(_: Request, exc: Exception) -> JSONResponse:
+    """A service's refusal as ``{"detail": ...}`` with its status, like an HTTPException."""
+    assert isinstance(exc, ServiceError)
+    return JSONResponse({"detail": exc.detail}, status_code=http_status(exc))
+
+
+def handle_service_errors(app: FastAPI) -> None:
+    """Answer the service layer's refusals on every route."""
+    app.add_exception_handler(ServiceError, service_error_handler)

@@ -3,7 +3,7 @@
 The cookie holds the key's secret (HttpOnly, SameSite=Lax, Secure over https, path /ui, no expiry
 date: it ends with the browser session). Every request looks the key up again with
 ``storage.keys.find_active``, so revoking or expiring a key signs its sessions out at once; the caller
-becomes the same :class:`app.api.deps.Principal` the API builds, and is held to the same per-key rate
+becomes the same :class:`app.services.access.Principal` the API builds, and is held to the same per-key rate
 limit. Forms that change something carry a token derived from the secret (checked with
 ``hmac.compare_digest``), and requests a browser marks as cross-site (``Sec-Fetch-Site``) are refused.
 """
@@ -17,9 +17,9 @@ from typing import Annotated
 
 from fastapi import Depends, HTTPException, Request, status
 
-from app.api.deps import Principal
 from app.api.middleware import retry_after_header
-from storage.keys import find_active, granted_spacecraft, role_at_least
+from app.services.access import Principal, identify
+from storage.keys import role_at_least
 
 COOKIE = "attitude_session"
 COOKIE_PATH = "/ui"
@@ -35,10 +35,7 @@ def session_secret(request: Request) -> str | None:
 
 def principal_from_secret(request: Request, secret: str) -> Principal | None:
     with request.app.state.sessions() as session:
-        key = find_active(session, secret)
-        if key is None:
-            return None
-        return Principal(key.id, key.name, key.role, granted_spacecraft(key))
+        return identify(session, secret)
 
 
 def current_principal(request: Request) -> Principal | None:

@@ -1,41 +1,37 @@
 """Web UI pages of jobs: list with live status, run form, job page, reports (HTML, PDF, JSON), artifacts.
 
-Submitting and cancelling go through the API's own route functions, so the UI applies exactly the
-API's checks (parameters, window, reference data, roles, spacecraft grants).
+Submitting and cancelling go through the services the API uses (app/services/jobs.py), so the UI
+applies exactly the API's checks (parameters, window, reference data, roles, spacecraft grants).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import urllib.parse
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Form, HTTPException, Query, Request, status
+from fastapi import APIRouter, Form, HTTPException, Query, Request
 from fastapi.responses import FileResponse, HTMLResponse, JSONResponse, RedirectResponse, Response
 from pydantic import ValidationError
-from sqlalchemy import select
 
-from app.api.deps import SessionDep
-from app.api.routes import jobs as jobs_api
-from app.api.routes.spacecraft import get_spacecraft
-from app.jobs.registry import registry
-from app.reports.job_report import render_html, render_pdf, report_json
+from app.api.deps import SessionDep, SettingsDep, StoreDep
+from app.api.errors import http_status
+from app.reports.job_report import render_html, render_pdf
 from app.reports.summary import layout
+from app.services import jobs
+from app.services.errors import ServiceError
+from app.services.jobs import JobCreate
+from app.services.spacecraft import visible_spacecraft
 from app.web.auth import WebOperator, WebViewer, check_form, current_principal
 from app.web.render import NO_STORE, HtmlRoute, page
-from app.web.routes import TIME_SCALES, visible_spacecraft
-from storage.jobs import FINAL, ArtifactStore
-from storage.models import Artifact, Job, Spacecraft
+from app.web.routes import TIME_SCALES
+from storage.jobs import FINAL
 
 router = APIRouter(prefix="/ui/jobs", route_class=HtmlRoute, include_in_schema=False)
 
 STATUSES = ("queued", "running", "succeeded", "failed", "cancelled")
 MAX_LISTED = 100
-
-
-def artifact_store(request: Request) -> ArtifactStore:
-    settings = request.app.state.settings
-    return ArtifactStore(getattr(settings, "artifacts_url", None) or settings.artifacts_dir)
 
 
 @router.get("")
@@ -44,20 +40,11 @@ def job_list(request: Request, session: SessionDep, who: WebViewer, spacecraft: 
     wanted_status = status_ or None
     if wanted_status is not None and wanted_status not in STATUSES:
         raise HTTPException(422, f"status must be one of {', '.join(STATUSES)}")
-    q = select(Job, Spacecraft).join(Spacecraft, Spacecraft.id == Job.spacecraft_id)
-    if spacecraft:
-        q = q.where(Spacecraft.id == get_spacecraft(session, spacecraft, who).id)
-    if who.spacecraft_ids is not None:
-        q = q.where(Spacecraft.id.in_(who.spacecraft_ids))
-    if type:
-        q = q.where(Job.type == type)
-    if wanted_status:
-        q = q.where(Job.status == wanted_status)
-    rows = session.execute(q.order_by(Job.created_at.desc()).limit(MAX_LISTED + 1)).all()
-    return page(request, "jobs.html", jobs=[(j, s.name) for j, s in rows[:MAX_LISTED]], more=len(rows) > MAX_LISTED,
-                spacecraft_names=[s.name for s in visible_spacecraft(session, who)], types=sorted(registry()),
-                statuses=STATUSES, selected={"spacecraft": spacecraft or "", "type": type or "",
-                                             "status": wanted_status or ""})
+    listed = jobs.list_jobs(session, who, spacecraft or None, type or None, wanted_status, None, MAX_LISTED)
+    return page(request, "jobs.html", jobs=[(j, s.name) for j, s in listed.items], more=listed.next_cursor is not None,
+                spacecraft_names=[s.name for s in visible_spacecraft(session, who)],
+                types=sorted(j.name for j in jobs.job_types()), statuses=STATUSES,
+                selected={"spacecraft": spacecraft or "", "type": type or "", "status": wanted_status or ""})
 
 
 @router.get("/status")
@@ -67,10 +54,7 @@ def job_status(request: Request, session: SessionDep, ids: str = "") -> JSONResp
     if who is None:
         return JSONResponse({"detail": "sign in again"}, status_code=401, headers=NO_STORE)
     wanted = [i for i in ids.split(",") if i][:100]
-    rows = session.execute(select(Job.id, Job.status, Job.progress, Job.stage, Job.error, Job.spacecraft_id)
-                           .where(Job.id.in_(wanted))).all() if wanted else []
-    out = {r.id: {"status": r.status, "progress": r.progress, "stage": r.stage, "error": r.error,
-                  "final": r.status in FINAL} for r in rows if who.may_use(r.spacecraft_id)}
+    out = {job_id: dataclasses.asdict(p) for job_id, p in jobs.progress(session, who, wanted).items()}
     return JSONResponse(out, headers=NO_STORE)
 
 
@@ -83,7 +67,7 @@ def _form_defaults(request: Request) -> dict[str, str]:
 
 def _new_form(request: Request, session: Any, who: Any, values: dict[str, str], status_code: int = 200,
               error: str | None = None, errors: list[Any] | None = None) -> HTMLResponse:
-    types = sorted(registry().values(), key=lambda j: j.name)
+    types = sorted(jobs.job_types(), key=lambda j: j.name)
     schemas = {j.name: j.params.model_json_schema().get("properties", {}) for j in types}
     return page(request, "job_new.html", status_code=status_code, values=values, types=types, schemas=schemas,
                 spacecraft_names=[s.name for s in visible_spacecraft(session, who)], time_scales=TIME_SCALES,
@@ -112,73 +96,64 @@ def submit_job(request: Request, session: SessionDep, who: WebOperator, type: An
     except ValueError as exc:
         return _new_form(request, session, who, values, 422, f"parameters and reference must be JSON objects: {exc}")
     try:
-        body = jobs_api.JobCreate(type=type, spacecraft=spacecraft, start=start.strip() or None,
-                                  end=end.strip() or None, time_scale=time_scale, params=parsed_params,
-                                  reference=parsed_reference)
-        accepted = jobs_api.submit(body, request, session, who)
+        body = JobCreate(type=type, spacecraft=spacecraft, start=start.strip() or None, end=end.strip() or None,
+                         time_scale=time_scale, params=parsed_params, reference=parsed_reference)
+        job = jobs.submit(session, body, who, on_submit=request.app.state.executor.wake)
     except ValidationError as exc:
         return _new_form(request, session, who, values, 422, "invalid job request",
                          [{"column": ".".join(str(p) for p in e["loc"]), "message": e["msg"]} for e in exc.errors()])
-    except HTTPException as exc:
+    except ServiceError as exc:
         detail = exc.detail
         if isinstance(detail, dict):
-            return _new_form(request, session, who, values, exc.status_code, str(detail.get("message")),
+            return _new_form(request, session, who, values, http_status(exc), str(detail.get("message")),
                              detail.get("errors"))
-        return _new_form(request, session, who, values, exc.status_code, str(detail))
-    return RedirectResponse(f"/ui/jobs/{accepted.id}", status_code=303)
+        return _new_form(request, session, who, values, http_status(exc), str(detail))
+    return RedirectResponse(f"/ui/jobs/{job.id}", status_code=303)
 
 
 @router.get("/{job_id}")
 def job_page(request: Request, job_id: str, session: SessionDep, who: WebViewer) -> HTMLResponse:
-    job, sc = jobs_api.get_job(session, job_id, who)
-    jt = registry().get(job.type)
-    data = report_json(job, sc, jt)
-    return page(request, "job.html", job=job, sc=sc, jt=jt, d=data, summary=layout(data["summary"]),
-                final=job.status in FINAL)
+    r = jobs.report(session, job_id, who)
+    return page(request, "job.html", job=r.job, sc=r.spacecraft, jt=r.job_type, d=r.data,
+                summary=layout(r.data["summary"]), final=r.job.status in FINAL)
 
 
 @router.post("/{job_id}/cancel")
 def cancel_job(request: Request, job_id: str, session: SessionDep, who: WebOperator,
                csrf: Annotated[str | None, Form()] = None) -> RedirectResponse:
     check_form(request, csrf)
-    jobs_api.cancel(job_id, session, who)
+    jobs.cancel(session, job_id, who)
     return RedirectResponse(f"/ui/jobs/{urllib.parse.quote(job_id, safe='')}", status_code=303)
 
 
+def _inline(r: jobs.JobReport, ext: str) -> dict[str, str]:
+    return {**NO_STORE, "Content-Disposition": f'inline; filename="{r.job.type}_{r.job.id}.{ext}"'}
+
+
 @router.get("/{job_id}/report")
-def report_html(request: Request, job_id: str, session: SessionDep, who: WebViewer) -> HTMLResponse:
-    job, sc = jobs_api.get_job(session, job_id, who)
-    data = report_json(job, sc, registry().get(job.type), telemetry=request.app.state.store)
-    html = render_html(data, job, artifact_store(request), ui=True)
-    return HTMLResponse(html, headers={**NO_STORE,
-                                       "Content-Disposition": f'inline; filename="{job.type}_{job.id}.html"'})
+def report_html(job_id: str, session: SessionDep, store: StoreDep, settings: SettingsDep,
+                who: WebViewer) -> HTMLResponse:
+    r = jobs.report(session, job_id, who, telemetry=store)
+    html = render_html(r.data, r.job, jobs.artifact_store(settings), ui=True)
+    return HTMLResponse(html, headers=_inline(r, "html"))
 
 
 @router.get("/{job_id}/report.pdf")
-def report_pdf(request: Request, job_id: str, session: SessionDep, who: WebViewer) -> Response:
-    job, sc = jobs_api.get_job(session, job_id, who)
-    data = report_json(job, sc, registry().get(job.type), telemetry=request.app.state.store)
-    return Response(render_pdf(data, job, artifact_store(request)), media_type="application/pdf",
-                    headers={**NO_STORE, "Content-Disposition": f'inline; filename="{job.type}_{job.id}.pdf"'})
+def report_pdf(job_id: str, session: SessionDep, store: StoreDep, settings: SettingsDep, who: WebViewer) -> Response:
+    r = jobs.report(session, job_id, who, telemetry=store)
+    return Response(render_pdf(r.data, r.job, jobs.artifact_store(settings)), media_type="application/pdf",
+                    headers=_inline(r, "pdf"))
 
 
 @router.get("/{job_id}/report.json")
-def report_json_download(request: Request, job_id: str, session: SessionDep, who: WebViewer) -> JSONResponse:
-    job, sc = jobs_api.get_job(session, job_id, who)
-    data = report_json(job, sc, registry().get(job.type), telemetry=request.app.state.store)
-    return JSONResponse(data, headers={**NO_STORE,
-                                       "Content-Disposition": f'inline; filename="{job.type}_{job.id}.json"'})
+def report_json_download(job_id: str, session: SessionDep, store: StoreDep, who: WebViewer) -> JSONResponse:
+    r = jobs.report(session, job_id, who, telemetry=store)
+    return JSONResponse(r.data, headers=_inline(r, "json"))
 
 
 @router.get("/{job_id}/artifacts/{name}")
-def artifact(request: Request, job_id: str, name: str, session: SessionDep, who: WebViewer) -> FileResponse:
-    jobs_api.get_job(session, job_id, who)
-    art = session.scalar(select(Artifact).where(Artifact.job_id == job_id, Artifact.name == name))
-    if art is None:
-        raise HTTPException(status.HTTP_404_NOT_FOUND, f"job {job_id} has no artifact {name!r}")
-    path = artifact_store(request).path(art)
-    if not path.is_file():
-        raise HTTPException(status.HTTP_410_GONE, f"artifact {name!r} of job {job_id} is missing on disk")
-    inline = art.media_type.startswith("image/")
-    return FileResponse(path, media_type=art.media_type, filename=art.name, headers=NO_STORE,
+def artifact(job_id: str, name: str, session: SessionDep, settings: SettingsDep, who: WebViewer) -> FileResponse:
+    f = jobs.artifact_file(session, settings, job_id, name, who)
+    inline = f.media_type.startswith("image/")
+    return FileResponse(f.path, media_type=f.media_type, filename=f.filename, headers=NO_STORE,
                         content_disposition_type="inline" if inline else "attachment")

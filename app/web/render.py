@@ -13,8 +13,10 @@ from fastapi.responses import HTMLResponse, RedirectResponse
 from fastapi.routing import APIRoute
 from jinja2 import Environment, FileSystemLoader, select_autoescape
 
-from app.api.deps import Principal
+from app.api.errors import http_status
 from app.reports.summary import iso, wall
+from app.services.access import Principal
+from app.services.errors import ServiceError
 from app.version import __version__
 from app.web.auth import LoginRequired, csrf_token, session_secret
 from storage.keys import role_at_least
@@ -61,7 +63,8 @@ def login_redirect(request: Request) -> RedirectResponse:
 
 
 class HtmlRoute(APIRoute):
-    """UI routes answer errors with HTML pages and missing sessions with the sign-in form."""
+    """UI routes answer errors (HTTP errors and the refusals of app/services, with the API's status codes)
+    with HTML pages and missing sessions with the sign-in form."""
 
     def get_route_handler(self) -> Callable[[Request], Coroutine[Any, Any, Response]]:
         handler = super().get_route_handler()
@@ -73,6 +76,8 @@ class HtmlRoute(APIRoute):
                 return login_redirect(request)
             except HTTPException as exc:
                 return error_page(request, exc.status_code, exc.detail, exc.headers)
+            except ServiceError as exc:
+                return error_page(request, http_status(exc), exc.detail)
             except RequestValidationError as exc:
                 errors = [{"row": None, "column": ".".join(str(p) for p in e.get("loc", ())[1:]) or None,
                            "message": e.get("msg", "invalid")} for e in exc.errors()]

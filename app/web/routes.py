@@ -2,7 +2,7 @@
 
 Server-rendered (Jinja2), a little JavaScript for live job status (static/app.js), no build step.
 Every page checks the caller exactly as the API does: the same roles (viewer reads, operator uploads
-and runs jobs) and the same spacecraft grants, through the API's own lookup functions.
+and runs jobs) and the same spacecraft grants, through the services the API uses (app/services).
 """
 
 from __future__ import annotations
@@ -13,28 +13,21 @@ import io
 import urllib.parse
 from typing import Annotated, Any
 
-import numpy as np
 from fastapi import APIRouter, File, Form, HTTPException, Request, UploadFile, status
 from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import FileResponse, HTMLResponse, RedirectResponse, Response
-from sqlalchemy import func, select
-from sqlalchemy.orm import Session
 
-from app.api.deps import Principal, SessionDep, StoreDep
-from app.api.routes.spacecraft import get_spacecraft, latest_config
-from app.api.routes.telemetry import (
-    TooManyRows,
-    get_stream,
-    ingest_upload,
-    read_telemetry,
-)
+from app.api.deps import SessionDep, StoreDep
+from app.api.errors import http_status
+from app.api.files import download_response
 from app.ingest.errors import UploadError
-from app.ingest.formats import decoders
-from app.ingest.parse import UnsupportedMediaType
-from app.ingest.validate import UploadOptions
-from app.jobs.registry import registry
 from app.reports import specs as speclib
 from app.reports import trends as trendlib
+from app.services import coverage, jobs, telemetry, trends
+from app.services.downloads import table_download
+from app.services.errors import Unsupported
+from app.services.spacecraft import get_spacecraft, latest_config, overview
+from app.services.times import parse_bound
 from app.web import timeline
 from app.web.auth import (
     COOKIE,
@@ -47,8 +40,6 @@ from app.web.auth import (
 )
 from app.web.render import STATIC, HtmlRoute, page
 from processing.streams import STREAMS
-from processing.time import timescales
-from storage.models import Ingest, Job, Spacecraft, TelemetryFile
 from storage.telemetry import ConflictError, IngestMeta
 
 router = APIRouter(prefix="/ui", route_class=HtmlRoute, include_in_schema=False)
@@ -109,41 +100,18 @@ def logout(request: Request) -> RedirectResponse:
     return response
 
 
-def visible_spacecraft(session: Session, who: Principal) -> list[Spacecraft]:
-    return [sc for sc in session.scalars(select(Spacecraft).order_by(Spacecraft.name)) if who.may_use(sc.id)]
-
-
 @router.get("/")
 def index(request: Request, session: SessionDep, who: WebViewer) -> HTMLResponse:
-    rows = []
-    for sc in visible_spacecraft(session, who):
-        streams = session.execute(
-            select(TelemetryFile.stream, func.min(TelemetryFile.t_min_tai_ns), func.max(TelemetryFile.t_max_tai_ns),
-                   func.sum(TelemetryFile.rows)).where(TelemetryFile.spacecraft_id == sc.id)
-            .group_by(TelemetryFile.stream).order_by(TelemetryFile.stream)).all()
-        last_job = session.scalar(select(Job).where(Job.spacecraft_id == sc.id)
-                                  .order_by(Job.created_at.desc()).limit(1))
-        n_jobs = session.scalar(select(func.count(Job.id)).where(Job.spacecraft_id == sc.id)) or 0
-        rows.append({"name": sc.name, "config_version": latest_config(session, sc).version,
-                     "streams": [{"stream": s, "first": int(a), "last": int(b), "rows": int(n or 0)}
-                                 for s, a, b, n in streams],
-                     "n_jobs": n_jobs, "last_job": last_job})
-    return page(request, "index.html", spacecraft=rows)
+    return page(request, "index.html", spacecraft=overview(session, who))
+
+
+def _stripped(value: str | None) -> str | None:
+    return value.strip() if value is not None else None
 
 
 def parse_time(value: str | None, field: str) -> int | None:
     """ISO 8601 UTC (or seconds since 1970 UTC) to TAI ns; None for empty."""
-    if value is None or not value.strip():
-        return None
-    text = value.strip()
-    try:
-        try:
-            seconds = float(text)
-        except ValueError:
-            return int(timescales.iso_to_tai_ns(np.array([text], dtype=object), "utc")[0])
-        return int(timescales.seconds_to_tai_ns(np.array([seconds]), "utc")[0])
-    except timescales.TimeValueError as exc:
-        raise HTTPException(422, f"{field}: {exc}") from None
+    return parse_bound(_stripped(value), "utc", field)
 
 
 @router.get("/spacecraft/{name}")
@@ -154,26 +122,23 @@ def spacecraft_page(request: Request, name: str, session: SessionDep, who: WebVi
     t0, t1 = parse_time(start, "start"), parse_time(end, "end")
     if t0 is not None and t1 is not None and t1 <= t0:
         raise HTTPException(422, "end must be after start")
-    tl = timeline.build(session, sc.id, t0, t1)
-    ingests = list(session.scalars(select(Ingest).where(Ingest.spacecraft_id == sc.id)
-                                   .order_by(Ingest.created_at.desc()).limit(20)))
-    jobs = [(j, sc.name) for j in session.scalars(select(Job).where(Job.spacecraft_id == sc.id)
-                                                   .order_by(Job.created_at.desc()).limit(20))]
-    just_uploaded = session.get(Ingest, uploaded) if uploaded else None
-    if just_uploaded is not None and just_uploaded.spacecraft_id != sc.id:
-        just_uploaded = None
+    tl = coverage.build(session, sc.id, t0, t1)
     return page(request, "spacecraft.html", sc=sc, config=cfg, specs=speclib.parse(cfg.config), timeline=tl,
-                ingests=ingests, jobs=jobs, streams=list(STREAMS), formats=sorted(decoders()),
-                time_scales=TIME_SCALES, view_start=start or "", view_end=end or "", uploaded=just_uploaded,
-                job_types=sorted(registry().values(), key=lambda j: j.name))
+                geometry=timeline.geometry(tl) if tl is not None else None,
+                ingests=telemetry.recent_ingests(session, sc, 20),
+                jobs=[(j, sc.name) for j in jobs.recent_jobs(session, sc, 20)], streams=list(STREAMS),
+                formats=sorted(d.name for d in telemetry.list_formats()), time_scales=TIME_SCALES,
+                view_start=start or "", view_end=end or "",
+                uploaded=telemetry.find_ingest(session, sc, uploaded) if uploaded else None,
+                job_types=sorted(jobs.job_types(), key=lambda j: j.name))
 
 
 @router.get("/spacecraft/{name}/telemetry/{stream}.csv")
 def telemetry_csv(name: str, stream: str, session: SessionDep, store: StoreDep, who: WebViewer,
                   start: str | None = None, end: str | None = None, sensor: str | None = None) -> Response:
     """The stored samples of one stream in a window, as the API's CSV download."""
-    return read_telemetry(name=name, stream=stream, session=session, store=store, who=who, start=start, end=end,
-                          format="csv", time_scale="utc", time_format="iso", sensor=sensor)
+    table = telemetry.read(session, store, name, stream, who, start, end, "utc", sensor)
+    return download_response(table_download(table, "csv", "utc", "iso", f"{name}_{stream}"))
 
 
 def _content_type(upload: UploadFile) -> str:
@@ -193,7 +158,7 @@ async def upload(request: Request, name: str, session: SessionDep, store: StoreD
                  format: Annotated[str | None, Form()] = None) -> Response:
     """The upload form: the same validation and all-or-nothing ingest as the API's upload route."""
     check_form(request, csrf)
-    spec = get_stream(stream)
+    spec = telemetry.get_stream(stream)
     sc = get_spacecraft(session, name, who)
     config = latest_config(session, sc).config
     if time_scale not in TIME_SCALES:
@@ -203,18 +168,12 @@ async def upload(request: Request, name: str, session: SessionDep, store: StoreD
     meta = IngestMeta(filename=(file.filename or "")[:255] or None,
                       content_type=content_type[:100], size_bytes=len(body),
                       checksum_sha256=hashlib.sha256(body).hexdigest(), time_scale=time_scale, api_key_id=who.key_id)
-    opts = UploadOptions(time_scale=time_scale, sensor=(sensor or "").strip() or None, norm_tolerance=1e-3,
-                         quaternion_direction=quaternion_direction,
-                         n_panels=len(config.get("solar_panels", [])) or None)
+    opts = telemetry.upload_options(config, time_scale, (sensor or "").strip() or None, 1e-3, quaternion_direction)
     context: dict[str, Any] = {"sc": sc, "stream": stream, "filename": file.filename}
     try:
         rec, _notes = await run_in_threadpool(
-            ingest_upload, session, store, sc, spec, body, content_type, opts, meta, config,
+            telemetry.ingest_upload, session, store, sc, spec, body, content_type, opts, meta, config,
             (format or None) if format != "table" else None, request.app.state.settings.max_upload_rows)
-    except TooManyRows as exc:
-        return page(request, "upload_result.html", status_code=413, message=str(exc), errors=[], **context)
-    except UnsupportedMediaType as exc:
-        return page(request, "upload_result.html", status_code=415, message=str(exc), errors=[], **context)
     except UploadError as exc:
         return page(request, "upload_result.html", status_code=422,
                     message=f"upload rejected, nothing stored: {exc}",
@@ -223,47 +182,34 @@ async def upload(request: Request, name: str, session: SessionDep, store: StoreD
         return page(request, "upload_result.html", status_code=409,
                     message=f"upload rejected, nothing stored: {exc.total} rows differ from stored samples with "
                             "the same identity (sensor, time)", errors=[], conflicts=exc.rows, **context)
+    except (telemetry.TooManyRows, Unsupported) as exc:
+        return page(request, "upload_result.html", status_code=http_status(exc), message=str(exc.detail), errors=[],
+                    **context)
     target = f"/ui/spacecraft/{urllib.parse.quote(sc.name, safe='')}?{urllib.parse.urlencode({'uploaded': rec.id})}"
     return RedirectResponse(target + "#uploads", status_code=303)
-
-
-def _trend_selection(session: Session, sc: Spacecraft, job_type: str | None, start: str | None,
-                     end: str | None) -> tuple[list[trendlib.Trend], list[str]]:
-    t0, t1 = parse_time(start, "start"), parse_time(end, "end")
-    available = sorted(session.scalars(select(Job.type).where(Job.spacecraft_id == sc.id,
-                                                              Job.status == "succeeded").distinct()))
-    if job_type:
-        jobs = trendlib.succeeded_jobs(session, sc.id, [job_type], start_tai_ns=t0, end_tai_ns=t1)
-        metrics = trendlib.generic_metrics(job_type, jobs)
-    else:
-        metrics = list(trendlib.KEY_METRICS)
-        jobs = trendlib.succeeded_jobs(session, sc.id, {m.job_type for m in metrics}, start_tai_ns=t0, end_tai_ns=t1)
-    specs = speclib.parse(latest_config(session, sc).config)
-    return trendlib.trends(jobs, metrics, specs), available
 
 
 @router.get("/spacecraft/{name}/trends")
 def trends_page(request: Request, name: str, session: SessionDep, who: WebViewer, type: str | None = None,
                 start: str | None = None, end: str | None = None) -> HTMLResponse:
-    sc = get_spacecraft(session, name, who)
-    selected, available = _trend_selection(session, sc, type or None, start, end)
+    sel = trends.select_trends(session, name, who, type or None, _stripped(start), _stripped(end))
     figures = [{"title": t.metric.title, "unit": t.metric.unit, "key": t.metric.key, "job_type": t.metric.job_type,
-                "png": trendlib.figure_png_b64(t), "n": len(t.points)} for t in selected]
+                "png": trendlib.figure_png_b64(t), "n": len(t.points)} for t in sel.trends]
     query = urllib.parse.urlencode({k: v for k, v in (("type", type), ("start", start), ("end", end)) if v})
-    return page(request, "trends.html", sc=sc, figures=figures, rows=trendlib.rows(selected), available=available,
-                selected_type=type or "", view_start=start or "", view_end=end or "", csv_query=query)
+    return page(request, "trends.html", sc=sel.spacecraft, figures=figures, rows=trendlib.rows(sel.trends),
+                available=sel.available, selected_type=type or "", view_start=start or "", view_end=end or "",
+                csv_query=query)
 
 
 @router.get("/spacecraft/{name}/trends.csv")
 def trends_csv(name: str, session: SessionDep, who: WebViewer, type: str | None = None, start: str | None = None,
                end: str | None = None) -> Response:
-    sc = get_spacecraft(session, name, who)
-    selected, _ = _trend_selection(session, sc, type or None, start, end)
+    sel = trends.select_trends(session, name, who, type or None, _stripped(start), _stripped(end))
     buf = io.StringIO()
     fields = ["job_id", "job_type", "series", "window_start", "window_end", "metric", "component", "value", "unit"]
     writer = csv.DictWriter(buf, fieldnames=fields, lineterminator="\n")
     writer.writeheader()
-    writer.writerows(trendlib.rows(selected))
+    writer.writerows(trendlib.rows(sel.trends))
     return Response(buf.getvalue(), media_type="text/csv",
-                    headers={"Content-Disposition": f'attachment; filename="{sc.name}_trends.csv"',
+                    headers={"Content-Disposition": f'attachment; filename="{sel.spacecraft.name}_trends.csv"',
                              "Cache-Control": "no-store"})

@@ -94,7 +94,7 @@ def test_an_unexpected_error_is_a_json_500(settings, monkeypatch):
     def boom(*args, **kwargs):
         raise RuntimeError("simulated bug")
 
-    monkeypatch.setattr("app.api.routes.telemetry.read_window", boom)
+    monkeypatch.setattr("app.services.telemetry.read_window", boom)
     with TestClient(create_app(settings), raise_server_exceptions=False) as c:
         c.headers["Authorization"] = f"Bearer {ADMIN_TOKEN}"
         make_spacecraft(c)

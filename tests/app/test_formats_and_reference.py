@@ -35,10 +35,10 @@ def _parse_table(raw: bytes) -> ParsedReference:
 
 @pytest.fixture
 def plugins(monkeypatch):
-    monkeypatch.setattr("app.api.routes.telemetry.decoders",
+    monkeypatch.setattr("app.services.telemetry.decoders",
                         lambda: {"lines": Decoder("lines", ("gyro",), _decode_lines, "test format")})
     kinds = {"toy": ReferenceKind("toy", _parse_table, "test kind")}
-    monkeypatch.setattr("app.api.routes.reference.reference_kinds", lambda: kinds)
+    monkeypatch.setattr("app.services.reference.reference_kinds", lambda: kinds)
 
 
 def test_named_format_upload(client, plugins):
@@ -82,7 +82,7 @@ def test_jobs_pin_their_reference_data(client, plugins, monkeypatch):
 
     base = reg.registry()
     toy_job = replace(base["executor_check"], reference=("toy",))
-    monkeypatch.setattr("app.api.routes.jobs.registry", lambda: {**base, "executor_check": toy_job})
+    monkeypatch.setattr("app.services.jobs.registry", lambda: {**base, "executor_check": toy_job})
     make_spacecraft(client)
     old = client.post("/api/v1/reference/toy", content=b"2000-01-01T00:00:00Z 1\n").json()
     new = client.post("/api/v1/reference/toy", content=b"2020-01-01T00:00:00Z 1\n2030-01-01T00:00:00Z 2\n").json()

@@ -80,10 +80,10 @@ def inputs(scenario):
 @pytest.fixture
 def stages(monkeypatch):
     jobs = _registry({"data_screening": SCREENING, "orbital_attitude": ORBITAL})
-    from app.api.routes import jobs as jobs_routes
     from app.jobs import runner
+    from app.services import jobs as jobs_service
 
-    for module in (registry_module, runner, jobs_routes):  # in-process only: worker processes import afresh
+    for module in (registry_module, runner, jobs_service):  # in-process only: worker processes import afresh
         monkeypatch.setattr(module, "registry", lambda: jobs)
     return jobs
 

@@ -1,26 +1,23 @@
-"""Reference data sets: upload (parsed at once; bad files are 422 and nothing is stored), list, read."""
+"""Reference data sets: upload (parsed at once; bad files are 422 and nothing is stored), list, read
+(app/services/reference.py)."""
 
 from __future__ import annotations
 
 import datetime as dt
-import hashlib
 from typing import Annotated, Any
 
-import pyarrow as pa
-from fastapi import APIRouter, HTTPException, Query, Request, Response, status
+from fastapi import APIRouter, Query, Request, Response, status
 from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import FileResponse
 from pydantic import BaseModel
-from sqlalchemy import select
 
-from app.api.deps import Admin, Operator, SessionDep, Viewer
-from app.api.pagination import MAX_LIMIT, announce_next, paginate
-from app.api.routes.telemetry import read_limited, table_response
-from app.jobs.outputs import jsonable
-from app.reference.registry import reference_kinds
+from app.api.deps import Admin, Operator, SessionDep, SettingsDep, Viewer
+from app.api.files import download_response, read_limited
+from app.api.pagination import MAX_LIMIT, announce_next
+from app.services import reference as service
+from app.services.downloads import StoredFile
 from processing.time import timescales
 from storage.models import ReferenceDataset
-from storage.reference import ReferenceStore
 
 router = APIRouter(prefix="/api/v1/reference", tags=["reference data"])
 
@@ -49,35 +46,19 @@ def _out(d: ReferenceDataset) -> ReferenceOut:
                         end=_iso(d.end_tai_ns), details=d.details, created_at=d.created_at)
 
 
-def store_of(request: Request) -> ReferenceStore:
-    return ReferenceStore(request.app.state.settings.reference_url)
-
-
 @router.get("/kinds")
 def list_kinds(_: Viewer) -> list[dict[str, str]]:
-    return [{"kind": k.name, "description": k.description} for k in reference_kinds().values()]
+    return [{"kind": k.name, "description": k.description} for k in service.list_kinds()]
 
 
 @router.post("/{kind}", status_code=status.HTTP_201_CREATED, response_model=ReferenceOut,
              openapi_extra={"requestBody": {"required": True, "content": {
                  "application/octet-stream": {"schema": {"type": "string", "format": "binary"}}}}})
-async def upload_reference(kind: str, request: Request, session: SessionDep, who: Operator,
+async def upload_reference(kind: str, request: Request, session: SessionDep, settings: SettingsDep, who: Operator,
                            name: str | None = None, filename: str | None = None) -> ReferenceOut:
-    spec = reference_kinds().get(kind)
-    if spec is None:
-        raise HTTPException(404, f"unknown reference kind {kind!r}; kinds: {', '.join(sorted(reference_kinds()))}")
-    raw = await read_limited(request, request.app.state.settings.max_upload_bytes)
-    if not raw.strip():
-        raise HTTPException(422, "the request body is empty")
-    try:
-        parsed = await run_in_threadpool(spec.parse, raw)
-    except ValueError as exc:
-        raise HTTPException(422, f"not a valid {kind} file: {exc}") from None
-    row = await run_in_threadpool(
-        store_of(request).save, session, kind=kind, name=(name or filename or kind)[:255], filename=filename,
-        raw=raw, columns=parsed.columns, start_tai_ns=parsed.start_tai_ns, end_tai_ns=parsed.end_tai_ns,
-        details=jsonable({**parsed.details, "sha256": hashlib.sha256(raw).hexdigest()}), api_key_id=who.key_id)
-    session.commit()
+    service.get_kind(kind)
+    raw = await read_limited(request, settings.max_upload_bytes)
+    row = await run_in_threadpool(service.upload, session, settings, kind, raw, name, filename, who)
     return _out(row)
 
 
@@ -86,48 +67,25 @@ def list_reference(request: Request, response: Response, session: SessionDep, _:
                    kind: str | None = None, limit: Annotated[int, Query(ge=1, le=MAX_LIMIT)] = 100,
                    cursor: str | None = None) -> list[ReferenceOut]:
     """Reference data sets, newest first; more pages are announced in ``X-Next-Cursor``/``Link``."""
-    q = select(ReferenceDataset)
-    if kind is not None:
-        q = q.where(ReferenceDataset.kind == kind)
-    rows = list(session.scalars(paginate(q, ReferenceDataset.created_at, ReferenceDataset.id, cursor, limit)))
-    return [_out(d) for d in announce_next(request, response, rows, limit, lambda r: (r.created_at, r.id))]
-
-
-def get_dataset(session: Any, dataset_id: str) -> ReferenceDataset:
-    d = session.get(ReferenceDataset, dataset_id)
-    if d is None:
-        raise HTTPException(404, f"reference data set {dataset_id!r} not found")
-    return d
+    page = service.list_datasets(session, kind, cursor, limit)
+    return [_out(d) for d in announce_next(request, response, page, limit)]
 
 
 @router.get("/{kind}/{dataset_id}", response_model=ReferenceOut)
 def read_reference(kind: str, dataset_id: str, session: SessionDep, _: Viewer) -> ReferenceOut:
-    d = get_dataset(session, dataset_id)
-    if d.kind != kind:
-        raise HTTPException(404, f"reference data set {dataset_id!r} is not of kind {kind!r}")
-    return _out(d)
+    return _out(service.read(session, kind, dataset_id))
 
 
 @router.get("/{kind}/{dataset_id}/data")
-def reference_data(kind: str, dataset_id: str, request: Request, session: SessionDep, who: Viewer,
+def reference_data(kind: str, dataset_id: str, session: SessionDep, settings: SettingsDep, _: Viewer,
                    format: Annotated[str, Query(pattern="^(csv|parquet|json|raw)$")] = "csv") -> Response:
     """The parsed columns (csv, parquet, json; times as UTC) or the file as uploaded (raw)."""
-    read_reference(kind, dataset_id, session, who)
-    row = get_dataset(session, dataset_id)
-    store = store_of(request)
-    if format == "raw":
-        return FileResponse(store.raw_path(row), media_type="application/octet-stream",
-                            filename=row.filename or f"{kind}-{row.id}")
-    return table_response(pa.table(store.columns(row)), format, "utc", "iso", f"{kind}-{row.id}")
+    data = service.data(session, settings, kind, dataset_id, format)
+    if isinstance(data, StoredFile):
+        return FileResponse(data.path, media_type=data.media_type, filename=data.filename)
+    return download_response(data)
 
 
 @router.delete("/{kind}/{dataset_id}", response_model=ReferenceOut)
-def delete_reference(kind: str, dataset_id: str, request: Request, session: SessionDep, _: Admin) -> ReferenceOut:
-    d = get_dataset(session, dataset_id)
-    if d.kind != kind:
-        raise HTTPException(404, f"reference data set {dataset_id!r} is not of kind {kind!r}")
-    out = _out(d)
-    session.delete(d)
-    session.commit()
-    store_of(request).remove(dataset_id)
-    return out
+def delete_reference(kind: str, dataset_id: str, session: SessionDep, settings: SettingsDep, _: Admin) -> ReferenceOut:
+    return _out(service.delete(session, settings, kind, dataset_id))

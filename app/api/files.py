@@ -1,0 +1,61 @@
+"""Files in and out of the API: upload bodies (bounded in size, inflated from gzip as they arrive) and
+downloads of what the services hand out."""
+
+from __future__ import annotations
+
+import re
+
+from fastapi import HTTPException, Request, Response, status
+
+from app.ingest.inflate import GzipBodyError, GzipInflater, InflatedTooLarge
+from app.services.downloads import Download
+
+
+async def read_limited(request: Request, limit: int) -> bytes:
+    """The request body, refusing (413) more than ``limit`` bytes without reading it all.
+
+    ``Content-Encoding: gzip`` bodies are inflated as they arrive (every member; trailing bytes are a 422,
+    :mod:`app.ingest.inflate`), and the inflated size is held to the same limit, so a small "gzip bomb"
+    is refused early; other encodings are 415.
+    """
+    declared = request.headers.get("content-length")
+    if declared is not None and declared.isdigit() and int(declared) > limit:
+        raise HTTPException(413,
+                            f"body of {declared} bytes exceeds the limit of {limit} bytes")
+    encoding = request.headers.get("content-encoding", "identity").strip().lower()
+    if encoding not in ("identity", "gzip"):
+        raise HTTPException(status.HTTP_415_UNSUPPORTED_MEDIA_TYPE,
+                            f"Content-Encoding {encoding!r} is not supported; use gzip or none")
+    inflater = GzipInflater(limit) if encoding == "gzip" else None
+    chunks: list[bytes] = []
+    size = 0
+    try:
+        async for chunk in request.stream():
+            if inflater is not None:
+                chunk = inflater.feed(chunk)
+            size += len(chunk)
+            if size > limit:
+                raise HTTPException(413, f"body exceeds the limit of {limit} bytes")
+            chunks.append(chunk)
+        if inflater is not None:
+            inflater.close()
+    except InflatedTooLarge as exc:
+        raise HTTPException(413, str(exc)) from None
+    except GzipBodyError as exc:
+        raise HTTPException(422, str(exc)) from None
+    return b"".join(chunks)
+
+
+def upload_filename(request: Request, explicit: str | None) -> str | None:
+    """The upload's file name: ``explicit``, else the Content-Disposition filename (at most 255 characters)."""
+    if explicit:
+        return explicit[:255]
+    disposition = request.headers.get("content-disposition", "")
+    m = re.search(r'filename="?([^";]+)"?', disposition)
+    return m.group(1)[:255] if m else None
+
+
+def download_response(d: Download) -> Response:
+    """A download as an attachment."""
+    return Response(d.content, media_type=d.media_type,
+                    headers={"Content-Disposition": f'attachment; filename="{d.filename}"'})

@@ -1,0 +1,66 @@
+"""Stored tables as downloads (CSV, Parquet, JSON): the bytes, their media type and a file name."""
+
+from __future__ import annotations
+
+import io
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import pyarrow as pa
+import pyarrow.csv as pacsv
+import pyarrow.parquet as pq
+
+from app.jobs.outputs import jsonable
+from processing.streams import TIME_COLUMN
+from processing.time import timescales
+
+FORMATS = {"csv": "text/csv", "parquet": "application/vnd.apache.parquet", "json": "application/json"}
+
+
+@dataclass(frozen=True)
+class Download:
+    """A file to hand to the caller."""
+
+    content: bytes
+    media_type: str
+    filename: str
+
+
+def with_times(table: pa.Table, time_scale: str, time_format: str) -> pa.Table:
+    """``time_tai_ns`` replaced by ``time``: ISO 8601 on ``time_scale`` (iso) or seconds since 1970 (seconds)."""
+    if TIME_COLUMN not in table.column_names:
+        return table
+    tai = table.column(TIME_COLUMN).to_numpy()
+    if time_format == "iso":
+        times = pa.array(timescales.tai_ns_to_iso(tai, time_scale), pa.string())
+    else:
+        times = pa.array(timescales.tai_ns_to_seconds(tai, time_scale), pa.float64())
+    return table.drop_columns([TIME_COLUMN]).add_column(0, "time", times)
+
+
+def encode(table: pa.Table, fmt: str) -> bytes:
+    """The table as CSV, Parquet or JSON records (compact JSON, non-finite numbers as null)."""
+    if fmt == "json":
+        return json.dumps(jsonable(table.to_pylist()), ensure_ascii=False, allow_nan=False, indent=None,
+                          separators=(",", ":")).encode("utf-8")
+    buf = io.BytesIO()
+    if fmt == "csv":
+        pacsv.write_csv(table, buf)
+    else:
+        pq.write_table(table, buf)
+    return buf.getvalue()
+
+
+def table_download(table: pa.Table, fmt: str, time_scale: str, time_format: str, stem: str) -> Download:
+    """A table as a ``<stem>.<fmt>`` download; ``time_tai_ns`` becomes ``time`` on the requested scale."""
+    return Download(encode(with_times(table, time_scale, time_format), fmt), FORMATS[fmt], f"{stem}.{fmt}")
+
+
+@dataclass(frozen=True)
+class StoredFile:
+    """A file of a store to hand to the caller as it is."""
+
+    path: Path
+    media_type: str
+    filename: str

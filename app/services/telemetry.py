@@ -1,0 +1,141 @@
+"""Telemetry: streams, upload formats, all-or-nothing ingest of uploads, read-back, the ingest log."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import Any
+
+import pyarrow as pa
+from sqlalchemy import select
+from sqlalchemy.orm import Session
+
+from app.ingest.errors import RowError, UploadError
+from app.ingest.formats import Decoder, decoders
+from app.ingest.parse import UnsupportedMediaType, parse_body
+from app.ingest.validate import SensorPolicy, UploadOptions, validate
+from app.services.access import Principal
+from app.services.errors import NotFound, TooLarge, Unsupported
+from app.services.pages import Page, page_of, paginate
+from app.services.spacecraft import get_spacecraft
+from app.services.times import parse_window
+from processing.streams import STREAMS, StreamSpec
+from storage.models import Ingest, Spacecraft
+from storage.parquet_store import ParquetStore
+from storage.telemetry import IngestMeta, commit_ingest, read_window
+
+SINGLE_SENSOR_KINDS = {"gyro": "gyro", "magnetometer": "magnetometer", "sun_sensor": "sun_sensor"}
+
+
+class TooManyRows(TooLarge):
+    """An upload of more rows than ``max_upload_rows``."""
+
+
+def get_stream(stream: str) -> StreamSpec:
+    spec = STREAMS.get(stream)
+    if spec is None:
+        raise NotFound(f"unknown stream {stream!r}; streams: {', '.join(STREAMS)}")
+    return spec
+
+
+def list_formats() -> list[Decoder]:
+    """Upload formats besides the generic tables (``format=`` of an upload)."""
+    return list(decoders().values())
+
+
+def sensor_policy(spec: StreamSpec, config: dict[str, Any]) -> SensorPolicy:
+    """Which sensor names an upload of ``spec`` may use for this configuration (DESIGN.md)."""
+    if spec.sensor_kind == "star_trackers":
+        names = tuple(config.get("star_trackers", {}))
+        if len(names) == 1:
+            return SensorPolicy(names, names[0])
+        why = ("several star trackers are configured (" + ", ".join(names) + "): give sensor="
+               if names else "no star tracker is configured for this spacecraft: add one with "
+                             "PUT /config or give sensor=")
+        return SensorPolicy(names or None, None, why)
+    return SensorPolicy(None, spec.name if spec.sensor_kind is None else SINGLE_SENSOR_KINDS[spec.sensor_kind])
+
+
+def upload_options(config: dict[str, Any], time_scale: str, sensor: str | None, norm_tolerance: float,
+                   quaternion_direction: str) -> UploadOptions:
+    """The options of an upload to a spacecraft of configuration ``config``."""
+    return UploadOptions(time_scale=time_scale, sensor=sensor, norm_tolerance=norm_tolerance,
+                         quaternion_direction=quaternion_direction,
+                         n_panels=len(config.get("solar_panels", [])) or None)
+
+
+def _decode(body: bytes, content_type: str, spec: StreamSpec, fmt: str | None,
+            opts: UploadOptions) -> tuple[pa.Table, UploadOptions]:
+    """The upload as a table of canonical upload columns, by ``format`` or by Content-Type."""
+    if fmt is None or fmt == "table":
+        return parse_body(body, content_type), opts
+    decoder = decoders().get(fmt)
+    if decoder is None:
+        raise UploadError([RowError(None, "format", f"unknown format {fmt!r}; formats: "
+                                                     f"{', '.join(['table', *sorted(decoders())])}")])
+    if spec.name not in decoder.streams:
+        raise UploadError([RowError(None, "format", f"format {fmt} feeds {', '.join(decoder.streams)}, "
+                                                     f"not {spec.name}")])
+    if not body.strip():
+        raise UploadError([RowError(None, None, "the request body is empty")])
+    try:
+        decoded = decoder.decode(body, spec.name)
+    except ValueError as exc:
+        raise UploadError([RowError(None, None, f"not a valid {fmt} file: {exc}")]) from exc
+    if opts.sensor is not None and decoded.sensor is not None and opts.sensor != decoded.sensor:
+        raise UploadError([RowError(None, "sensor", f"the file names sensor {decoded.sensor!r}, the query "
+                                                     f"{opts.sensor!r}")])
+    return decoded.table, replace(opts, time_scale=decoded.time_scale,
+                                  quaternion_direction=decoded.quaternion_direction,
+                                  sensor=opts.sensor or decoded.sensor, notes=tuple(decoded.notes))
+
+
+def ingest_upload(session: Session, store: ParquetStore, sc: Spacecraft, spec: StreamSpec, body: bytes,
+                  content_type: str, opts: UploadOptions, meta: IngestMeta, config: dict[str, Any],
+                  fmt: str | None, max_rows: int) -> tuple[Ingest, tuple[str, ...]]:
+    """Decode, validate and store one upload; all or nothing (blocking: run it off the event loop).
+
+    Returns the ingest record and the notes of a file-format decoder. Raises UploadError (invalid rows),
+    Unsupported (media type), TooManyRows or storage.telemetry.ConflictError (rows differ from stored
+    samples); nothing is stored then."""
+    try:
+        table, opts = _decode(body, content_type, spec, fmt, opts)
+    except UnsupportedMediaType as exc:
+        raise Unsupported(str(exc)) from None
+    if table.num_rows > max_rows:
+        raise TooManyRows(f"{table.num_rows} rows exceed the limit of {max_rows} rows per upload; split the upload")
+    checked = validate(table, spec, sensor_policy(spec, config), opts)
+    record = commit_ingest(session, store, sc.id, spec, checked.table, checked.row_index, meta)
+    return record, opts.notes  # notes: what a file-format decoder did (frames, units)
+
+
+def read(session: Session, store: ParquetStore, name: str, stream: str, who: Principal, start: str | None,
+         end: str | None, time_scale: str, sensor: str | None = None) -> pa.Table:
+    """Stored samples of one stream in [start, end] (ISO 8601 or seconds since 1970 on ``time_scale``),
+    sorted by sensor and time, without duplicates."""
+    spec = get_stream(stream)
+    sc = get_spacecraft(session, name, who)
+    t0, t1 = parse_window(start, end, time_scale)
+    return read_window(session, store, sc.id, spec, t0, t1, sensor)
+
+
+def list_ingests(session: Session, name: str, who: Principal, stream: str | None, cursor: str | None,
+                 limit: int) -> Page[Ingest]:
+    """Uploads of the spacecraft, newest first."""
+    sc = get_spacecraft(session, name, who)
+    q = select(Ingest).where(Ingest.spacecraft_id == sc.id)
+    if stream is not None:
+        q = q.where(Ingest.stream == get_stream(stream).name)
+    rows = list(session.scalars(paginate(q, Ingest.created_at, Ingest.id, cursor, limit)))
+    return page_of(rows, limit, lambda r: (r.created_at, r.id))
+
+
+def recent_ingests(session: Session, sc: Spacecraft, limit: int) -> list[Ingest]:
+    """The newest ``limit`` uploads of a spacecraft."""
+    return list(session.scalars(select(Ingest).where(Ingest.spacecraft_id == sc.id)
+                                .order_by(Ingest.created_at.desc()).limit(limit)))
+
+
+def find_ingest(session: Session, sc: Spacecraft, ingest_id: str) -> Ingest | None:
+    """The upload ``ingest_id`` if it is one of the spacecraft's."""
+    rec = session.get(Ingest, ingest_id)
+    return rec if rec is not None and rec.spacecraft_id == sc.id else None
