@@ -125,6 +125,8 @@ def _job_outcome(args: argparse.Namespace, job: dict[str, Any]) -> int:
     text = f"job {job['id']} {job['status']}"
     if job.get("error"):
         text += f": {job['error']}"
+    for w in (job.get("result") or {}).get("warnings", []):
+        text += f"\nWARNING {w['code']}: {w['message']}"
     if job["status"] == "succeeded":
         text += f"\nreport: {args.url.rstrip('/')}{job['report_url']}"
     _print(args, job, text)

@@ -154,10 +154,44 @@ class TaskInputs:
 @dataclass(frozen=True)
 class TaskResult:
     """What a task returns: ``summary`` (JSON-able, units suffixed in key names), ``tables``
-    (name -> equal-length column arrays; ``time_tai_ns`` columns are shown as UTC in exports) and
-    ``files`` (file name -> (content, media type), e.g. a CCSDS AEM the task wrote)."""
+    (name -> equal-length column arrays; ``time_tai_ns`` columns are shown as UTC in exports),
+    ``files`` (file name -> (content, media type), e.g. a CCSDS AEM the task wrote) and ``warnings``
+    (:class:`ResultWarning`: what the data say about the result's own assumptions; the runner puts them
+    first in the summary as ``warnings``)."""
 
     summary: dict[str, Any]
     tables: dict[str, dict[str, NDArray[Any]]] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
     files: dict[str, tuple[bytes, str]] = field(default_factory=dict)
+    warnings: list[ResultWarning] = field(default_factory=list)
+
+
+WARNING_CODES: dict[str, str] = {
+    "quaternion_convention": "the star-tracker quaternions agree with the gyro only under another convention "
+                             "(scalar-last order, the inverse direction or a transposed mounting)",
+    "time_offset": "a significant time offset between two sensors' time tags",
+    "correlated_residuals": "the residuals are not white: a sigma that assumes white noise would be too small",
+    "outliers_removed": "samples were rejected as outliers before the estimate",
+    "not_observable": "the data do not determine some parameters; they are reported as null",
+    "bias_not_constant": "the gyro offsets change across the window: the constant-offset model does not hold",
+    "filter_inconsistent": "the filter's innovations disagree with its own covariance (NIS or whiteness)",
+    "implausible_input": "an input is far from what the sensor or the model can produce",
+}
+"""The stable warning codes of job results (README, "Warnings"): code -> what it means."""
+
+
+@dataclass(frozen=True)
+class ResultWarning:
+    """A result's statement about itself: a stable ``code`` (:data:`WARNING_CODES`), a ``message`` that says
+    what was found and what to do, and the ``evidence`` (JSON-able numbers: test statistics, thresholds)."""
+
+    code: str
+    message: str
+    evidence: Mapping[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.code not in WARNING_CODES:
+            raise ValueError(f"unknown warning code {self.code!r}; codes: {', '.join(sorted(WARNING_CODES))}")
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"code": self.code, "message": self.message, "evidence": dict(self.evidence)}

@@ -203,7 +203,7 @@ def _execute(job_id: str, settings: Settings, sessions: sessionmaker[Session], a
         result = job_type.run(inputs, params, progress)
         progress(0.9, "drawing figures")
         figures = job_type.figures(result, params)
-        summary = jsonable(result.summary)
+        summary = jsonable({"warnings": [w.as_dict() for w in result.warnings], **result.summary})
         stored = write_outputs(artifacts, job_id, result, figures, summary)
         with sessions.begin() as session:
             jobstore.add_artifacts(session, job_id, stored)

@@ -137,6 +137,7 @@ def report_json(job: Job, sc: Spacecraft, job_type: JobType | None, *,
     checks = speclib.evaluate(job.type, stored.get("summary"), specifications)
     streams = sorted(set(inputs) | set(job_type.streams if job_type else ()))
     return {
+        "warnings": (stored.get("summary") or {}).get("warnings", []),
         "job": {"id": job.id, "type": job.type, "title": job_type.title if job_type else job.type,
                 "paper": job_type.paper if job_type else "", "description": job_type.description if job_type else "",
                 "status": job.status, "error": job.error, "created_at": job.created_at.isoformat(),

@@ -98,7 +98,7 @@ class Check:
     values: tuple[float | None, ...]
     components: tuple[str, ...]
     limit: str
-    passed: tuple[bool | None, ...]  # None: value missing (not a failure, reported as "n/a")
+    passed: tuple[bool | None, ...]  # None: value not determined (null in the summary): UNDETERMINED, never PASS
 
     @property
     def ok(self) -> bool | None:
@@ -162,8 +162,11 @@ def _bound_check(label: str, key: str, raw: Any, *, scale: float, unit: str, lo:
 
 def _norm_check(label: str, key: str, raw: Any, *, scale: float, unit: str, hi: float) -> Check | None:
     values = _numbers(raw)
-    if values is None or any(v is None for v in values):
+    if values is None:
         return None
+    if any(v is None or not math.isfinite(v) for v in values):  # a component the data did not determine
+        return Check(label=label, key=key, unit=unit, values=(None,), components=("angle",),
+                     limit=f"≤ {hi:g} {unit}", passed=(None,))
     angle = math.sqrt(sum(v * v for v in values if v is not None)) * scale
     return Check(label=label, key=key, unit=unit, values=(angle,), components=("angle",),
                  limit=f"≤ {hi:g} {unit}", passed=(angle <= hi,))
@@ -224,8 +227,13 @@ def parse(config: Mapping[str, Any] | None) -> Specifications | None:
 
 
 def verdict(checks: list[Check]) -> str:
-    """'pass', 'fail' or 'none' (no limit applied or nothing judged)."""
-    judged = [c.ok for c in checks if c.ok is not None]
-    if not judged:
+    """'fail' when any judged value fails; else 'undetermined' when a limited quantity was not determined
+    (null: not observable in the window); else 'pass'; 'none' when no limit applied."""
+    if not checks:
         return "none"
-    return "pass" if all(judged) else "fail"
+    judged = [p for c in checks for p in c.passed if p is not None]
+    if judged and not all(judged):
+        return "fail"
+    if any(p is None for c in checks for p in c.passed):
+        return "undetermined"
+    return "pass"

@@ -153,8 +153,14 @@ def axis_names(summary: Mapping[str, Any]) -> tuple[str, str, str]:
     return AXES
 
 
+SHOWN_APART = ("warnings",)
+"""Summary keys the reports show in their own section (warnings come first), not in the layout."""
+
+
 def _walk(obj: Mapping[str, Any], prefix: str, out: Layout) -> None:
     for key, value in obj.items():
+        if key in SHOWN_APART:
+            continue
         name = f"{prefix}{key}"
         conv = _conversion(str(key))
         if _is_vector3(value):

@@ -296,6 +296,12 @@ def test_specification_checks_by_hand():
     assert specs.evaluate("telemetry_coverage", {"n_gaps": 0}, s)[0].ok is True
     assert specs.evaluate("star_tracker_accuracy", {"sigma_arcsec": [1, 1, 1]}, None) == []
     assert specs.verdict([]) == "none"
+    # A limited quantity that the data did not determine (null) is UNDETERMINED, never a PASS.
+    (und,) = specs.evaluate("alignment_calibration", {"misalignment_rad": [1e-5, None, 0.0]}, s)[:1]
+    assert und.passed == (None,) and und.ok is None
+    assert specs.verdict([und]) == "undetermined"
+    assert specs.verdict([und, align[0]]) == "fail"
+    assert specs.verdict(specs.evaluate("telemetry_coverage", {"n_gaps": 0}, s)) == "pass"
 
 
 def test_summary_layout_groups_vectors_statistics_and_tables():

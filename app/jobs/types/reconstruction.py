@@ -38,7 +38,7 @@ from processing.attitude import rotations
 from processing.screening.flags import filter_streams
 from processing.spacecraft import Spacecraft
 from processing.streams import STREAMS
-from processing.tasks import Progress, TaskError, TaskInputs, TaskResult
+from processing.tasks import Progress, ResultWarning, TaskError, TaskInputs, TaskResult
 
 STAGES: tuple[tuple[str, float], ...] = (  # (job type, relative cost for the progress bar)
     ("data_screening", 1.0),
@@ -172,6 +172,7 @@ def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
     calibrations: dict[str, Any] = {}
     tables: dict[str, dict[str, NDArray[Any]]] = {}
     files: dict[str, tuple[bytes, str]] = {}
+    warnings: list[ResultWarning] = []
     done = 0.0
     for name in order:
         jt = available[name]
@@ -203,8 +204,11 @@ def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
             notes.append(f"{name} failed: {exc}")
             continue
         stage_progress(1.0, "done")
-        stages[name] = {"status": "succeeded", "summary": result.summary, "notes": list(result.notes),
-                        "params": stage_params[name].model_dump(mode="json")}
+        stages[name] = {"status": "succeeded",
+                        "summary": {"warnings": [w.as_dict() for w in result.warnings], **result.summary},
+                        "notes": list(result.notes), "params": stage_params[name].model_dump(mode="json")}
+        warnings += [ResultWarning(w.code, f"{name}: {w.message}", {**w.evidence, "stage": name})
+                     for w in result.warnings]
         notes.extend(f"{name}: {n}" for n in result.notes)
         for table_name, columns in result.tables.items():
             tables[f"{name}{SEPARATOR}{table_name}"] = columns
@@ -226,7 +230,7 @@ def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
         "stages": stages,
         "calibrations": calibrations,
     }
-    return TaskResult(summary=summary, tables=tables, notes=notes, files=files)
+    return TaskResult(summary=summary, tables=tables, notes=notes, files=files, warnings=warnings)
 
 
 def figures(result: TaskResult, params: Params) -> dict[str, Figure]:
