@@ -54,7 +54,7 @@ from processing.orbits.gnss_orbit import (
     time_since_ascending_node_s,
 )
 from processing.signal.sine_series import fit_sine_series, select_harmonics, sine_series_design
-from processing.star_tracker.accuracy import (
+from processing.star_tracker.smoothing import (
     mean_quaternion,
     residual_mrps,
     sensor_axis_residuals,

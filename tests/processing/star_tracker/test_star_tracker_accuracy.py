@@ -19,6 +19,8 @@ from processing.star_tracker.accuracy import (
     StarTrackerAccuracy,
     StarTrackerAccuracyError,
     analyze_star_tracker_accuracy,
+)
+from processing.star_tracker.smoothing import (
     mean_quaternion,
     rate_from_mrp,
     residual_mrps,
