@@ -56,7 +56,8 @@ from processing.environment.sun import sun_direction_I, sun_position_I_m
 from processing.frames.earth_orientation import EarthOrientation
 from processing.frames.earth_rotation_interp import gcrs_to_itrs_mat_interp
 from processing.frames.orbital import dcm_IO_lvlh_004
-from processing.gyroless.ekf import FILTERS, FilterTuning, initial_covariance, triad_q_OB
+from processing.gyroless.ekf import FilterTuning
+from processing.gyroless.filtering import FILTERS, initial_covariance, triad_q_OB
 from processing.gyroless.magnetic_control import (
     ENERGY_ALPHA_004,
     ENERGY_BETA_004,
