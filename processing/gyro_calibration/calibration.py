@@ -55,15 +55,14 @@ from processing.gyro_calibration.drift_observer import (
     stationary_noise,
 )
 from processing.gyro_calibration.slews import SlewReport, slew_report
-from processing.signal.two_pass_filter import (
+from processing.signal.gyro_integration import (
     IntervalRotations,
-    QuasiCoordinateSpline,
     SubstepPlan,
     interval_rate_maxima,
     interval_rotations,
     plan_substeps,
-    two_pass_filter,
 )
+from processing.signal.two_pass_filter import QuasiCoordinateSpline, two_pass_filter
 from processing.units import RAD_PER_ARCSEC, RAD_PER_DEG
 
 __all__ = [

@@ -13,7 +13,7 @@ a1* = -2 exp(-xi nu T_o) cos(nu T_o sqrt(1 - xi^2))), so that the estimates ente
 initial error within about T_r (:func:`observer_gains`).
 
 Nonlinear form (000, eq. 8). The attitude estimate is a quaternion, propagated over [t_k, t_k+1] by the
-integral of eq. (7) on the calibrated gyro spline (processing.signal.two_pass_filter.interval_rotations), and
+integral of eq. (7) on the calibrated gyro spline (processing.signal.gyro_integration.interval_rotations), and
 corrected by the rotation Q(e, g phi) of the fraction g of the innovation rotation; the drift by
 4 g2 sigma of the innovation. Implementation notes (all equivalent to 000 in the linear limit):
 
@@ -283,7 +283,7 @@ def run_drift_observer(
 
     t_s (K,) [s] increasing sample times; q_meas (K, 4) measured q_IS (frame A = star tracker);
     interval_q (K - 1, 4), interval_rotvec (K - 1, 3), interval_valid (K - 1,): rotation of A over each
-    interval from the calibrated spline corrected with drift_ref_rad_s (two_pass_filter.interval_rotations);
+    interval from the calibrated spline corrected with drift_ref_rad_s (gyro_integration.interval_rotations);
     correction_on (K,) bool: class MT_alpha at the sample (correction allowed).
     rate_map (3, 3): L = dcm_SG / (1 + m^), the map from a gyro-frame rate to the A-frame rate.
     t_r_s, xi: 000's T_r and xi; acquisition: growing-memory gains at start-up (see module docstring).

@@ -12,7 +12,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from processing.gyro_calibration.drift_observer import MODE_PREDICTED, DriftObserverResult, slew_error_bound
-from processing.signal.two_pass_filter import IntervalRotations
+from processing.signal.gyro_integration import IntervalRotations
 
 __all__ = ["SlewReport", "slew_report"]
 

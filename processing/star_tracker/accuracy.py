@@ -68,8 +68,10 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from processing.attitude import rotations
-from processing.signal.sine_series import Method, SineSeriesFit
-from processing.signal.spectral import Spectrum, alias_frequency, amplitude_spectrum_of_samples, find_lines
+from processing.signal.sine_series import Method
+from processing.signal.sine_series_fit import SineSeriesFit
+from processing.signal.spectral import Spectrum, alias_frequency, amplitude_spectrum_of_samples
+from processing.signal.spectral_lines import find_lines
 from processing.star_tracker.accuracy_gyro import (
     GyroAnalysis,
     GyroComparison,

@@ -22,8 +22,10 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from processing.signal.sine_series import SineSeriesFit, SineSeriesSolver, fit_sine_series
-from processing.signal.spectral import SinusoidFit, alias_frequency, find_lines, fit_sinusoids, separable_frequencies
+from processing.signal.sine_series import SineSeriesSolver, fit_sine_series
+from processing.signal.sine_series_fit import SineSeriesFit
+from processing.signal.spectral import alias_frequency
+from processing.signal.spectral_lines import SinusoidFit, find_lines, fit_sinusoids, separable_frequencies
 from processing.star_tracker.smoothing import SegmentSmoothing, rate_from_mrp, seconds_since
 
 __all__ = [

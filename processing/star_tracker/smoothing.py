@@ -22,7 +22,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from processing.attitude import rotations
-from processing.signal.sine_series import Method, SineSeriesFit, SineSeriesSolver
+from processing.signal.sine_series import Method, SineSeriesSolver
+from processing.signal.sine_series_fit import SineSeriesFit
 from processing.units import NS_PER_S
 
 __all__ = [
