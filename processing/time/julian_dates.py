@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from processing.time.calendar import LeapTable
+from processing.time.leap_seconds import LeapTable
 from processing.time.timescales import (
     NUMBER_LIMIT_S,
     READING_MINUS_TAI_NS,

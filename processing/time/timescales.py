@@ -4,7 +4,7 @@ Every time inside the service is ``tai_ns``: an int64 count of SI nanoseconds si
 1970-01-01T00:00:00 TAI. TAI is continuous, so a leap second is an ordinary second of it and is
 never lost. This module converts user input (ISO 8601 strings, float seconds, integer nanoseconds
 read on a stated scale) into ``tai_ns`` and back. Siblings: processing.time.julian_dates (two-part
-Julian dates for ERFA), processing.time.calendar (calendar arithmetic, the leap-second table) and
+Julian dates for ERFA), processing.time.leap_seconds (calendar arithmetic, the leap-second table) and
 processing.time.iso_text (ISO 8601 text scanning and formatting at array speed); the helpers here
 without a leading underscore (check_scale, as_int_ns, report_codes, ...) are shared with them.
 
@@ -34,8 +34,8 @@ import numpy as np
 import pandas as pd
 from numpy.typing import ArrayLike, NDArray
 
-from processing.time.calendar import LeapTable, civil_from_days, days_from_civil, days_in_month
 from processing.time.iso_text import ISO_WIDTH, put_digits, scan_iso
+from processing.time.leap_seconds import LeapTable, civil_from_days, days_from_civil, days_in_month
 from processing.units import NS_PER_DAY, NS_PER_S, S_PER_DAY
 
 SCALES = ("utc", "tai", "gps", "tt")
@@ -73,7 +73,7 @@ class TimeValueError(ValueError):
 
 
 # --------------------------------------------------------------------------------------------
-# Helpers: error reporting and UTC <-> TAI with the leap-second table (processing.time.calendar).
+# Helpers: error reporting and UTC <-> TAI with the leap-second table (processing.time.leap_seconds).
 
 
 def check_scale(scale: str) -> str:

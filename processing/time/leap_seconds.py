@@ -1,5 +1,5 @@
-"""Proleptic Gregorian calendar arithmetic on int64 day counts and ERFA's leap-second table as
-nanosecond breakpoints (the building blocks of processing.time.timescales). Pure and vectorised."""
+"""ERFA's leap-second table as nanosecond breakpoints, and the proleptic Gregorian calendar arithmetic on
+int64 day counts it needs (building blocks of processing.time.timescales). Pure and vectorised."""
 
 from __future__ import annotations
 
