@@ -188,7 +188,8 @@ def fit_drift_trend(t_s: ArrayLike, drift: ArrayLike, degree: int, *, min_span_p
     x = (t - t_ref) / scale
     v = x[:, None] ** np.arange(d + 1)
     coef, *_ = np.linalg.lstsq(v, b, rcond=None)
-    return DriftTrend(coefficients=coef, t_ref_s=t_ref, scale_s=scale, span_s=(float(t[0]), float(t[-1])))
+    return DriftTrend(coefficients=np.asarray(coef, dtype=np.float64), t_ref_s=t_ref, scale_s=scale,
+                      span_s=(float(t[0]), float(t[-1])))
 
 
 @dataclass(frozen=True)

@@ -203,7 +203,7 @@ def simulate_seed002(
         Generator(PCG64(s)) for s in SeedSequence(seed).spawn(8))
     start = int(iso_to_tai_ns([DEFAULT_START_UTC])[0]) if start_tai_ns is None else int(start_tai_ns)
     n = int(np.floor(duration_s / period_s + 1e-9)) + 1
-    t_s = np.arange(n) * period_s
+    t_s = np.asarray(np.arange(n) * period_s, dtype=np.float64)
     time_ns = start + np.round(t_s * NS_PER_S).astype(np.int64)
     orbit = _orbit(start, t_s, time_ns, altitude_m, ltan_h, u0_rad)
     att = _attitude(t_s, pitch_mean_rad, pitch_amplitude_rad, yaw_amplitude_rad, roll_rate_rad_s, rng_att)

@@ -8,14 +8,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 from numpy.typing import NDArray
 
 from processing.attitude.rigid_body import RigidBody004, dcm_BO_columns, q_OB_from_roll_pitch_yaw_004
 from processing.gyroless.ekf import FilterTuning
-from processing.gyroless.filtering import FILTERS, initial_covariance, triad_q_OB
+from processing.gyroless.filtering import FILTERS, FilterKind, initial_covariance, triad_q_OB
 from processing.units import RAD_PER_DEG
 
 __all__ = ["Environment004", "History", "LoopSetup", "Sensors004", "closed_loop", "rotvec", "unit"]
@@ -154,9 +154,9 @@ def _onboard_filter(loop: LoopSetup, k: int, est: Any, m: Measurement, b_O_unit:
     if est is None:
         q_init = (triad_q_OB(b_O_unit[k], s_O[k], b_B_unit, m.s_B) if m.s_B is not None
                   else np.array([1.0, 0.0, 0.0, 0.0]))
-        c2i = np.array(dcm_BO_columns(tuple(q_init))[1])  # type: ignore[arg-type]
-        P0 = initial_covariance(loop.estimator, q_init, (10 if m.s_B is not None else 60) * RAD_PER_DEG, 2e-3,
-                                1e-5)
+        c2i = np.array(dcm_BO_columns(tuple(q_init))[1])
+        attitude_sigma_rad = (10 if m.s_B is not None else 60) * RAD_PER_DEG
+        P0 = initial_covariance(cast(FilterKind, loop.estimator), q_init, attitude_sigma_rad, 2e-3, 1e-5)
         est = FILTERS[loop.estimator](loop.J, q_init, -w0 * c2i, P0, loop.tuning)
     else:
         est.predict(loop.step_s, w0, w0 * w0, prev_torque_B)

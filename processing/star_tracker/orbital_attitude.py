@@ -188,9 +188,9 @@ def fit_trend_sines(t_s: NDArray, y: NDArray, *, trend_degree: int = 3, harmonic
         resid0 = float(np.sum((y - q @ proj) ** 2))
         tail = np.concatenate([np.cumsum((proj ** 2)[::-1])[::-1], [0.0]])
         ms = np.arange(cap + 1)
-        p = base + ms
-        rss = resid0 + tail[p]
-        score = np.where(n > p, n * rss / np.maximum(n - p, 1) ** 2, np.inf)
+        n_par = base + ms
+        rss = resid0 + tail[n_par]
+        score = np.where(n > n_par, n * rss / np.maximum(n - n_par, 1) ** 2, np.inf)
         m = int(ms[int(np.argmin(score))])
     else:
         m = top

@@ -197,7 +197,7 @@ def iso_to_tai_ns(values: ArrayLike, scale: str = "utc") -> NDArray[np.int64]:
     """
     scale = check_scale(scale)
     is_str_array = isinstance(values, np.ndarray) and values.dtype.kind == "U"
-    raw = values if is_str_array else np.asarray(values, dtype=object)
+    raw = np.asarray(values) if is_str_array else np.asarray(values, dtype=object)
     shape = raw.shape
     raw = raw.reshape(-1)
     n = raw.size
