@@ -35,7 +35,7 @@ install-dev: $(DEV)
 
 lint: $(DEV)
 	$(BIN)/ruff check .
-	$(BIN)/mypy app storage
+	$(BIN)/mypy app storage processing
 
 # Test files are spread over TEST_WORKERS processes (a file stays on one worker: module fixtures are built once).
 TEST_WORKERS ?= 2

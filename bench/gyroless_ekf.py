@@ -16,8 +16,8 @@ import time
 
 import numpy as np
 
-from processing.gyroless.ekf import attitude_errors_rad, run_filter
 from processing.gyroless.estimation import GyrolessSettings, estimate_gyroless_attitude, prepare_gyroless_inputs
+from processing.gyroless.filtering import attitude_errors_rad, run_filter
 from processing.gyroless.rts_smoother import rts_smooth
 from processing.simulate.seed004 import orbit_period_s, simulate_seed004
 from processing.time.timescales import iso_to_tai_ns

@@ -128,7 +128,7 @@ def dp45_mrp_step(
         s0 = (s_arr[:, 0], s_arr[:, 1], s_arr[:, 2])
     ks: list[tuple[FloatArray, FloatArray, FloatArray]] = []
     w_cache = {0.0: w0}
-    stage = s0
+    stage: tuple[FloatArray, ...] = s0
     for i, c in enumerate(DP45_NODES):
         if i > 0:
             stage = tuple(

@@ -35,7 +35,7 @@ import erfa
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from processing.time.timescales import tai_ns_to_jd
+from processing.time.julian_dates import tai_ns_to_jd
 from processing.units import R_EARTH_M, WGS84_F
 
 __all__ = [

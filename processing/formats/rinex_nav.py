@@ -161,69 +161,100 @@ def parse_rinex_nav(raw: bytes | str) -> RinexNav:
     lines = text.splitlines()
     version, file_system, leap, i = _header(lines)
     rows: list[dict[str, Any]] = []
-    v3 = version >= 3
     while i < len(lines):
-        line = lines[i]
-        if not line.strip():
+        if not lines[i].strip():
             i += 1
             continue
-        line_no = i + 1
-        if v3:
-            system = line[0].upper()
-            if system not in _ORBIT_LINES:
-                raise RinexNavError(f"line {line_no}: expected a record start 'Snn YYYY MM DD ...', got {line[:23]!r}")
-            try:
-                prn = int(line[1:3])
-                y, mo, d, h, mi, s = (int(line[4:8]), int(line[9:11]), int(line[12:14]), int(line[15:17]),
-                                      int(line[18:20]), float(line[21:23]))
-            except ValueError:
-                raise RinexNavError(f"line {line_no}: bad record start {line[:23]!r}") from None
-            clock = _fields(line, 23, 3, line_no)
-            start = 4
-        else:
-            system = file_system
-            try:
-                prn = int(line[0:2])
-                yy = int(line[2:5])
-                y = yy + (1900 if yy >= 80 else 2000)
-                mo, d, h, mi = int(line[5:8]), int(line[8:11]), int(line[11:14]), int(line[14:17])
-                s = float(line[17:22])
-            except ValueError:
-                raise RinexNavError(f"line {line_no}: bad record start {line[:22]!r}") from None
-            clock = _fields(line, 22, 3, line_no)
-            start = 3
-        n_lines = _ORBIT_LINES[system]
-        if v3 and system == "R" and version >= 3.05:
-            n_lines = 4
-        values: list[float] = []
-        for k in range(1, n_lines + 1):
-            if i + k >= len(lines):
-                raise RinexNavError(f"line {line_no}: record of {system}{prn:02d} is truncated "
-                                    f"(expected {n_lines} orbit lines)")
-            values += _fields(lines[i + k].ljust(start + 76), start, 4, i + k + 1)
-        i += n_lines + 1
-        row: dict[str, Any] = {"system": system, "prn": prn, "sat": f"{system}{prn:02d}",
-                               "time_tai_ns": _epoch_tai_ns(system, y, mo, d, h, mi, s, line_no)}
-        if system in KEPLER_SYSTEMS:
-            row.update(af0_s=clock[0], af1_s_s=clock[1], af2_s_s2=clock[2])
-            row.update({name: v for name, v in zip(_KEPLER_FIELDS, values, strict=False) if not name.startswith("_")})
-            if not (np.isfinite(row["week"]) and np.isfinite(row["toe_s"]) and np.isfinite(row["sqrt_a_sqrt_m"])):
-                raise RinexNavError(f"line {line_no}: record of {row['sat']} lacks toe, week or sqrt(A)")
-            row["ref_tai_ns"] = int(week_seconds_to_tai_ns(system, np.array(row["week"]), np.array(row["toe_s"])))
-        else:
-            row.update(af0_s=clock[0], af1_s_s=clock[1], af2_s_s2=float("nan"))
-            st = dict(zip(_STATE_FIELDS, values, strict=False))
-            for axis in "xyz":
-                row[f"{axis}_m"] = st[f"{axis}_km"] * 1e3
-                row[f"v{axis}_m_s"] = st[f"v{axis}_km_s"] * 1e3
-                row[f"a{axis}_m_s2"] = st[f"a{axis}_km_s2"] * 1e3
-            row["health"] = st["health"]
-            row["freq_channel"] = st["freq_channel"] if system == "R" else float("nan")
-            row["ref_tai_ns"] = row["time_tai_ns"]
-        rows.append(row)
+        start = _record_start(lines[i], i + 1, version, file_system)
+        values = _orbit_values(lines, i, start)
+        i += start.n_lines + 1
+        rows.append(_record_row(start, values))
     if not rows:
         raise RinexNavError("the file has a header but no navigation records")
     rows.sort(key=lambda r: (r["sat"], r["time_tai_ns"]))
+    return RinexNav(version=version, file_system=file_system, columns=_columns(rows), leap_seconds=leap)
+
+
+@dataclass(frozen=True)
+class _RecordStart:
+    """The first line of a record: system, PRN, epoch (year, month, day, hour, minute, second on the
+    system's scale), the three clock fields, the column where the orbit lines' fields start, the number
+    of orbit lines, and the line number (1-based)."""
+
+    system: str
+    prn: int
+    epoch: tuple[int, int, int, int, int, float]
+    clock: list[float]
+    field_start: int
+    n_lines: int
+    line_no: int
+
+
+def _record_start(line: str, line_no: int, version: float, file_system: str) -> _RecordStart:
+    if version >= 3:
+        system = line[0].upper()
+        if system not in _ORBIT_LINES:
+            raise RinexNavError(f"line {line_no}: expected a record start 'Snn YYYY MM DD ...', got {line[:23]!r}")
+        try:
+            prn = int(line[1:3])
+            y, mo, d, h, mi, s = (int(line[4:8]), int(line[9:11]), int(line[12:14]), int(line[15:17]),
+                                  int(line[18:20]), float(line[21:23]))
+        except ValueError:
+            raise RinexNavError(f"line {line_no}: bad record start {line[:23]!r}") from None
+        clock = _fields(line, 23, 3, line_no)
+        field_start = 4
+    else:
+        system = file_system
+        try:
+            prn = int(line[0:2])
+            yy = int(line[2:5])
+            y = yy + (1900 if yy >= 80 else 2000)
+            mo, d, h, mi = int(line[5:8]), int(line[8:11]), int(line[11:14]), int(line[14:17])
+            s = float(line[17:22])
+        except ValueError:
+            raise RinexNavError(f"line {line_no}: bad record start {line[:22]!r}") from None
+        clock = _fields(line, 22, 3, line_no)
+        field_start = 3
+    n_lines = 4 if version >= 3.05 and system == "R" else _ORBIT_LINES[system]
+    return _RecordStart(system, prn, (y, mo, d, h, mi, s), clock, field_start, n_lines, line_no)
+
+
+def _orbit_values(lines: list[str], i: int, start: _RecordStart) -> list[float]:
+    """The 4 fields of each orbit line after the record start at line index i."""
+    values: list[float] = []
+    for k in range(1, start.n_lines + 1):
+        if i + k >= len(lines):
+            raise RinexNavError(f"line {start.line_no}: record of {start.system}{start.prn:02d} is truncated "
+                                f"(expected {start.n_lines} orbit lines)")
+        values += _fields(lines[i + k].ljust(start.field_start + 76), start.field_start, 4, i + k + 1)
+    return values
+
+
+def _record_row(start: _RecordStart, values: list[float]) -> dict[str, Any]:
+    """One row of the columns: Keplerian fields or the state vector (km -> m)."""
+    system, clock = start.system, start.clock
+    row: dict[str, Any] = {"system": system, "prn": start.prn, "sat": f"{system}{start.prn:02d}",
+                           "time_tai_ns": _epoch_tai_ns(system, *start.epoch, start.line_no)}
+    if system in KEPLER_SYSTEMS:
+        row.update(af0_s=clock[0], af1_s_s=clock[1], af2_s_s2=clock[2])
+        row.update({name: v for name, v in zip(_KEPLER_FIELDS, values, strict=False) if not name.startswith("_")})
+        if not (np.isfinite(row["week"]) and np.isfinite(row["toe_s"]) and np.isfinite(row["sqrt_a_sqrt_m"])):
+            raise RinexNavError(f"line {start.line_no}: record of {row['sat']} lacks toe, week or sqrt(A)")
+        row["ref_tai_ns"] = int(week_seconds_to_tai_ns(system, np.array(row["week"]), np.array(row["toe_s"])))
+        return row
+    row.update(af0_s=clock[0], af1_s_s=clock[1], af2_s_s2=float("nan"))
+    st = dict(zip(_STATE_FIELDS, values, strict=False))
+    for axis in "xyz":
+        row[f"{axis}_m"] = st[f"{axis}_km"] * 1e3
+        row[f"v{axis}_m_s"] = st[f"v{axis}_km_s"] * 1e3
+        row[f"a{axis}_m_s2"] = st[f"a{axis}_km_s2"] * 1e3
+    row["health"] = st["health"]
+    row["freq_channel"] = st["freq_channel"] if system == "R" else float("nan")
+    row["ref_tai_ns"] = row["time_tai_ns"]
+    return row
+
+
+def _columns(rows: list[dict[str, Any]]) -> dict[str, NDArray[Any]]:
     columns: dict[str, NDArray[Any]] = {
         "system": np.array([r["system"] for r in rows], dtype=object),
         "prn": np.array([r["prn"] for r in rows], dtype=np.int64),
@@ -233,7 +264,7 @@ def parse_rinex_nav(raw: bytes | str) -> RinexNav:
     }
     for name in _FLOAT_COLUMNS:
         columns[name] = np.array([float(r.get(name, np.nan)) for r in rows], dtype=np.float64)
-    return RinexNav(version=version, file_system=file_system, columns=columns, leap_seconds=leap)
+    return columns
 
 
 def parse_rinex_nav_reference(raw: bytes) -> ParsedReference:

@@ -27,7 +27,7 @@ import erfa
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from processing.time.timescales import tai_ns_to_jd, tai_ns_to_ut1_jd
+from processing.time.julian_dates import tai_ns_to_jd, tai_ns_to_ut1_jd
 from processing.units import OMEGA_EARTH_RAD_S
 
 earth_rotation_rate_rad_s = OMEGA_EARTH_RAD_S

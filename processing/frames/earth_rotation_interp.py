@@ -19,7 +19,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from processing.frames.earth_orientation import EarthOrientation
-from processing.time.timescales import TT_MINUS_TAI_NS, UNIX_EPOCH_JD, tai_ns_to_ut1_jd
+from processing.time.julian_dates import tai_ns_to_ut1_jd
+from processing.time.timescales import TT_MINUS_TAI_NS, UNIX_EPOCH_JD
 from processing.units import NS_PER_DAY, OMEGA_EARTH_RAD_S
 
 __all__ = ["gcrs_to_itrs_mat_interp", "itrs_to_gcrs_state_interp"]

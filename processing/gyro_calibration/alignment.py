@@ -295,6 +295,41 @@ def estimate_alignment(
     min_spread, max_sigma_rad: observability thresholds (module docstring). Returns
     :class:`AlignmentEstimate`.
     """
+    smp = _alignment_samples(t_s, w_G_rad_s, w_A_rad_s, window, sample_weight)
+    q_prior = rotations.quat_canonical(rotations.quat_normalize(np.asarray(q_GS_prior, dtype=np.float64)))
+    q_nom = rotations.quat_canonical(rotations.quat_normalize(np.asarray(q_GS_nominal, dtype=np.float64)))
+    lin = _linear_step(smp, q_prior, float(scale_factor_prior), drift_degree)
+    rot = _quest_rotation(smp, lin.g_corr, q_prior)
+    obs = _observability(smp, rot, lin.cov[1:4, 1:4], q_prior, q_nom, min_spread, max_sigma_rad)
+    # Scale factor: weighted mean of |w^g| / |w^a| - 1 with weights sw |w^a|^2 (000: mean of the m_i).
+    g_norm = np.linalg.norm(lin.g_corr, axis=1)
+    m_est = float(np.sum(smp.sw * np.sqrt(rot.a_norm2) * g_norm) / rot.total) - 1.0
+    residual = rotations.quat_rotate(rotations.quat_conjugate(obs.q_GS), lin.g_corr) / (1.0 + m_est) - smp.a_vec
+    return AlignmentEstimate(
+        q_GS=obs.q_GS, misalignment_rad=obs.theta, scale_factor_error=m_est, misalignment_cov_rad2=lin.cov[1:4, 1:4],
+        scale_factor_sigma=float(np.sqrt(lin.cov[0, 0])), drift_offset=lin.offset,
+        drift_offset_sigma_rad_s=lin.offset_sigma, spread_eigenvalues=obs.spread_eigenvalues,
+        spread_axes=obs.spread_axes, observable_axes=obs.observable_axes, solver_disagreement_rad=rot.disagreement,
+        n_windows=smp.n_windows, n_samples=int(smp.g.shape[0]), residual_rad_s=residual, linearised=lin.x,
+    )
+
+
+@dataclass(frozen=True)
+class _Samples:
+    """The finite samples: times t (n,), gyro rates g and star-tracker rates a_vec (n, 3), window ids
+    renumbered 0..W-1, weights sw (n,) scaled to a largest of 1, and the number of windows W."""
+
+    t: FloatArray
+    g: FloatArray
+    a_vec: FloatArray
+    wid: NDArray[np.intp]
+    sw: FloatArray
+    n_windows: int
+
+
+def _alignment_samples(
+    t_s: ArrayLike, w_G_rad_s: ArrayLike, w_A_rad_s: ArrayLike, window: ArrayLike, sample_weight: ArrayLike | None
+) -> _Samples:
     t = np.asarray(t_s, dtype=np.float64)
     g = np.asarray(w_G_rad_s, dtype=np.float64)
     a_vec = np.asarray(w_A_rad_s, dtype=np.float64)
@@ -313,17 +348,30 @@ def estimate_alignment(
     n_win = int(wid.max()) + 1 if wid.size else 0
     if n_win < 3:
         raise AlignmentError(f"need at least 3 alignment windows with valid rates, got {n_win}")
-    q_prior = rotations.quat_canonical(rotations.quat_normalize(np.asarray(q_GS_prior, dtype=np.float64)))
-    q_nom = rotations.quat_canonical(rotations.quat_normalize(np.asarray(q_GS_nominal, dtype=np.float64)))
-    m0 = float(scale_factor_prior)
-    q_SG = rotations.quat_conjugate(q_prior)
+    return _Samples(t, g, a_vec, wid, sw, n_win)
 
-    # Linear step: residual drift polynomial (and the linearised dm, dtheta), jackknife covariance.
+
+@dataclass(frozen=True)
+class _Linear:
+    """The linear step: x = (dm, dtheta, drift coefficients in S), its jackknife covariance, the residual
+    drift polynomial in G and the sigma of its constant term, and the gyro rates with it removed."""
+
+    x: FloatArray
+    cov: FloatArray
+    offset: DriftTrend
+    offset_sigma: FloatArray
+    g_corr: FloatArray
+
+
+def _linear_step(smp: _Samples, q_prior: FloatArray, m0: float, drift_degree: int | None) -> _Linear:
+    """Residual drift polynomial (and the linearised dm, dtheta), delete-one-window jackknife covariance."""
+    t, g, a_vec, n_win = smp.t, smp.g, smp.a_vec, smp.n_windows
+    q_SG = rotations.quat_conjugate(q_prior)
     t_ref = 0.5 * float(t.min() + t.max())
     scale = max(0.5 * float(t.max() - t.min()), 1.0)
     x_t = (t - t_ref) / scale
     r = rotations.quat_rotate(q_SG, g) / (1.0 + m0) - a_vec
-    big_n, big_v = _normal_blocks(a_vec, r, x_t, sw, wid, drift_degree)
+    big_n, big_v = _normal_blocks(a_vec, r, x_t, smp.sw, smp.wid, drift_degree)
     n_tot, v_tot = big_n.sum(axis=0), big_v.sum(axis=0)
     # pseudo-inverses: a rotation about the only rate direction leaves the normal matrix singular
     x = np.linalg.pinv(n_tot, rcond=1e-12, hermitian=True) @ v_tot
@@ -335,25 +383,58 @@ def estimate_alignment(
     coef_G = (1.0 + m0) * rotations.quat_rotate(q_prior, coef_S)
     offset = DriftTrend(coefficients=coef_G, t_ref_s=t_ref, scale_s=scale, span_s=(float(t.min()), float(t.max())))
     offset_sigma = np.sqrt(np.diag(cov)[4:7]) * (1.0 + m0) if n_drift else np.zeros(3)
-    g_corr = g - offset(t)
+    return _Linear(x, cov, offset, offset_sigma, g - offset(t))
 
-    # QUEST on the unit vectors, weights sw |w^a|^2, with weak pseudo-pairs pinning unobservable rotations.
-    a_norm2 = np.sum(a_vec * a_vec, axis=1)
-    weight = sw * a_norm2
+
+@dataclass(frozen=True)
+class _Rotation:
+    """QUEST on the unit rate vectors: q_GS, the largest disagreement of the three solvers, the weights
+    sw |w^a|^2 (n,), their total and |w^a|^2 (n,)."""
+
+    q_GS: FloatArray
+    disagreement: float
+    weight: FloatArray
+    total: float
+    a_norm2: FloatArray
+
+
+def _quest_rotation(smp: _Samples, g_corr: FloatArray, q_prior: FloatArray) -> _Rotation:
+    """QUEST (000 eq. 9) on the unit vectors, weights sw |w^a|^2, with weak pseudo-pairs pinning
+    unobservable rotations to the prior."""
+    a_norm2 = np.sum(smp.a_vec * smp.a_vec, axis=1)
+    weight = smp.sw * a_norm2
     total = float(weight.sum())
     eye = np.eye(3)
     q_est, disagreement = _solve_wahba(
-        np.concatenate([g_corr, rotations.quat_rotate(q_prior, eye)]), np.concatenate([a_vec, eye]),
+        np.concatenate([g_corr, rotations.quat_rotate(q_prior, eye)]), np.concatenate([smp.a_vec, eye]),
         np.concatenate([weight, np.full(3, REGULARISATION * total)]),
     )
+    return _Rotation(q_est, disagreement, weight, total, a_norm2)
 
-    # Observability of the rotation from the spread of rate directions.
-    a_unit = a_vec / np.linalg.norm(a_vec, axis=1, keepdims=True)
-    spread = (total * eye - np.einsum("n,ni,nj->ij", weight, a_unit, a_unit)) / total
+
+@dataclass(frozen=True)
+class _Observability:
+    """The estimate with unobservable directions held at the prior: q_GS, misalignment theta (3,), the
+    spread matrix eigenvalues (ascending) and axes (columns), and the observable star-tracker axes."""
+
+    q_GS: FloatArray
+    theta: FloatArray
+    spread_eigenvalues: FloatArray
+    spread_axes: FloatArray
+    observable_axes: NDArray[np.bool_]
+
+
+def _observability(
+    smp: _Samples, rot: _Rotation, cov_th: FloatArray, q_prior: FloatArray, q_nom: FloatArray, min_spread: float,
+    max_sigma_rad: float,
+) -> _Observability:
+    """Observability of the rotation from the spread of rate directions (module docstring)."""
+    a_unit = smp.a_vec / np.linalg.norm(smp.a_vec, axis=1, keepdims=True)
+    spread = (rot.total * np.eye(3) - np.einsum("n,ni,nj->ij", rot.weight, a_unit, a_unit)) / rot.total
     lam, axes = np.linalg.eigh(spread)
-    cov_th = cov[1:4, 1:4]
     sig_dir = np.sqrt(np.maximum(np.einsum("ij,ik,kj->j", axes, cov_th, axes), 0.0))
     unobservable = (lam < min_spread) | (sig_dir > max_sigma_rad)
+    q_est = rot.q_GS
     theta = rotations.quat_to_rotvec(rotations.quat_multiply(rotations.quat_conjugate(q_nom), q_est))
     if np.any(unobservable):
         theta_prior = rotations.quat_to_rotvec(rotations.quat_multiply(rotations.quat_conjugate(q_nom), q_prior))
@@ -361,15 +442,4 @@ def estimate_alignment(
         theta = theta - u @ (u.T @ theta) + u @ (u.T @ theta_prior)
         q_est = rotations.quat_canonical(rotations.quat_multiply(q_nom, rotations.rotvec_to_quat(theta)))
     observable_axes = ~np.any(np.abs(axes[:, unobservable]) > 0.1, axis=1)
-
-    # Scale factor: weighted mean of |w^g| / |w^a| - 1 with weights sw |w^a|^2 (000: mean of the m_i).
-    g_norm = np.linalg.norm(g_corr, axis=1)
-    m_est = float(np.sum(sw * np.sqrt(a_norm2) * g_norm) / total) - 1.0
-    residual = rotations.quat_rotate(rotations.quat_conjugate(q_est), g_corr) / (1.0 + m_est) - a_vec
-    return AlignmentEstimate(
-        q_GS=q_est, misalignment_rad=theta, scale_factor_error=m_est, misalignment_cov_rad2=cov_th,
-        scale_factor_sigma=float(np.sqrt(cov[0, 0])), drift_offset=offset,
-        drift_offset_sigma_rad_s=offset_sigma, spread_eigenvalues=lam, spread_axes=axes,
-        observable_axes=observable_axes, solver_disagreement_rad=disagreement, n_windows=n_win,
-        n_samples=int(g.shape[0]), residual_rad_s=residual, linearised=x,
-    )
+    return _Observability(q_est, theta, lam, axes, observable_axes)

@@ -47,30 +47,28 @@ from processing.gyro_calibration.alignment import (
 )
 from processing.gyro_calibration.drift_observer import (
     MODE_CORRECTED,
-    MODE_PREDICTED,
     DriftObserverResult,
     DriftTrend,
     fit_drift_trend,
     ramp_lag_s,
     run_drift_observer,
-    slew_error_bound,
     stationary_noise,
 )
-from processing.signal.two_pass_filter import (
+from processing.gyro_calibration.slews import SlewReport, slew_report
+from processing.signal.gyro_integration import (
     IntervalRotations,
-    QuasiCoordinateSpline,
+    SubstepPlan,
     interval_rate_maxima,
     interval_rotations,
     plan_substeps,
-    two_pass_filter,
 )
+from processing.signal.two_pass_filter import QuasiCoordinateSpline, two_pass_filter
 from processing.units import RAD_PER_ARCSEC, RAD_PER_DEG
 
 __all__ = [
     "CalibrationError",
     "CalibrationSettings",
     "GyroCalibration",
-    "SlewReport",
     "apply_gyro_calibration",
     "calibrate_gyro",
     "correction_flags",
@@ -121,25 +119,6 @@ class CalibrationSettings:
     convergence_tolerance_rad_s: float = 0.01 * RAD_PER_ARCSEC
     window_outlier_factor: float = 1.5
     lag_compensation: bool = True
-
-
-@dataclass(frozen=True)
-class SlewReport:
-    """Slews (runs of samples with the correction off), each ended by a resumed correction.
-
-    start_s, end_s (P,): last corrected sample before and the resumed sample after [s]; rotation_angle_rad
-    (P,): integral of |w| over the slew; peak_rate_rad_s (P,); end_error_rad (P,): |innovation| at the
-    resumed sample (attitude error of the predicted estimate plus star-tracker noise);
-    bound_rad (P,): :func:`processing.gyro_calibration.drift_observer.slew_error_bound` with the 3-sigma
-    calibration errors.
-    """
-
-    start_s: FloatArray
-    end_s: FloatArray
-    rotation_angle_rad: FloatArray
-    peak_rate_rad_s: FloatArray
-    end_error_rad: FloatArray
-    bound_rad: FloatArray
 
 
 @dataclass(frozen=True)
@@ -206,25 +185,6 @@ def drift_convergence_time(t_s: ArrayLike, drift: ArrayLike, usable: ArrayLike, 
     return float(t[after[0]] - t[0]) if after.size else float("nan")
 
 
-def _slews(obs: DriftObserverResult, rot: IntervalRotations, bound_terms: dict[str, float]) -> SlewReport:
-    mode = obs.mode
-    resumed = np.flatnonzero((mode[1:] != MODE_PREDICTED) & (mode[:-1] == MODE_PREDICTED)) + 1
-    starts, ends, angles, peaks, errors = [], [], [], [], []
-    for k in resumed.tolist():  # one iteration per slew
-        j = k - 1
-        while j > 0 and mode[j] == MODE_PREDICTED:
-            j -= 1
-        starts.append(obs.t_s[j])
-        ends.append(obs.t_s[k])
-        angles.append(float(np.sum(np.linalg.norm(rot.rotvec_rad[j:k], axis=-1))))
-        peaks.append(float(np.max(rot.max_rate_rad_s[j:k])))
-        errors.append(float(np.linalg.norm(obs.innovation_rad[k])))
-    s, e, th = np.asarray(starts), np.asarray(ends), np.asarray(angles)
-    bound = slew_error_bound(e - s, th, **bound_terms)
-    return SlewReport(start_s=s, end_s=e, rotation_angle_rad=th, peak_rate_rad_s=np.asarray(peaks),
-                      end_error_rad=np.asarray(errors), bound_rad=np.asarray(bound, dtype=float))
-
-
 def calibrate_gyro(
     gyro_time_s: ArrayLike,
     increments: ArrayLike,
@@ -253,7 +213,66 @@ def calibrate_gyro(
     if not np.all(np.diff(t_st) > 0):
         raise CalibrationError("star-tracker times must be strictly increasing (one star tracker at a time)")
     report(0.02, "two-pass filter of the gyro increments")
-    spline = two_pass_filter(gyro_time_s, increments, interval_s)
+    spline = two_pass_filter(gyro_time_s, increments, interval_s)  # 1
+    report(0.05, "motion classes and alignment windows")
+    ctx = _context(spline, t_st, q_st, q_GS_nominal, cfg)  # 2
+    report(0.1, "pass 0: alignment and scale factor (QUEST) with a joint drift polynomial")
+    est = _align(ctx, None, ctx.q_nom, 0.0, cfg.trend_degree)  # 3
+    passes = _iterate(ctx, est, report)  # 4-5
+    report(0.92, "drift trend, convergence and slews")
+    drift = _drift_summary(ctx, passes)
+    slews = _slew_report(ctx, passes, drift.noise_rad_s)
+    report(1.0, "done")
+    last = passes.last
+    return GyroCalibration(
+        alignment=last.est, drift_rad_s=drift.end_rad_s, drift_model=last.model, drift_noise_rad_s=drift.noise_rad_s,
+        drift_convergence_s=drift.convergence_s, observer=last.obs, windows=ctx.windows.rates, rotations=last.rot,
+        spline=spline, iterations=list(passes.history), converged=passes.converged, slews=slews,
+        st_noise_rad=ctx.windows.st_noise_rad, integration_error_rad=float(np.max(last.rot.error_rad)),
+        windows_used=ctx.windows.used, observer_rate_map=last.rate_map, observer_drift_ref_rad_s=last.b_ref,
+    )
+
+
+# ---------------------------------------------------------------------------------------------------
+# The steps of :func:`calibrate_gyro` (module docstring), each returning a frozen record.
+
+
+@dataclass(frozen=True)
+class _Windows:
+    """Step 2: the star-tracker window rates, the windows used (fit residual test), and at their samples
+    the times, star-tracker rates w_A, window index, inverse rate variances and spline rates w_G; the
+    star-tracker noise per axis from the window fits."""
+
+    rates: WindowRates
+    used: NDArray[np.bool_]
+    t_s: FloatArray
+    w_A: FloatArray
+    window: NDArray[np.intp]
+    inv_var: FloatArray
+    w_G: FloatArray
+    st_noise_rad: FloatArray
+
+
+@dataclass(frozen=True)
+class _Context:
+    """What every pass uses: the star-tracker samples inside the gyro data, the nominal mounting, the
+    substep plan of the spline, the alignment windows, T_o, the drift-trend lag and the settings."""
+
+    t_st: FloatArray
+    q_st: FloatArray
+    q_nom: FloatArray
+    plan: SubstepPlan
+    windows: _Windows
+    t_o: float
+    lag: float
+    cfg: CalibrationSettings
+
+
+def _context(
+    spline: QuasiCoordinateSpline, t_st: FloatArray, q_st: FloatArray, q_GS_nominal: ArrayLike,
+    cfg: CalibrationSettings,
+) -> _Context:
+    """Step 2: motion classes from the filtered rate, alignment windows and their star-tracker rates."""
     inside = (t_st >= spline.t_s[0]) & (t_st <= spline.t_s[-1])
     t_st, q_st = t_st[inside], q_st[inside]
     if t_st.size < 3 * cfg.window_max:
@@ -263,8 +282,6 @@ def calibrate_gyro(
     q_nom = rotations.quat_canonical(rotations.quat_normalize(np.asarray(q_GS_nominal, dtype=np.float64)))
     t_o = float(np.median(np.diff(t_st)))
     lag = ramp_lag_s(t_o, cfg.t_r_s, cfg.xi) if cfg.lag_compensation else 0.0
-
-    report(0.05, "motion classes and alignment windows")
     plan = plan_substeps(spline, t_st)
     on = correction_flags(*interval_rate_maxima(plan), cfg.rate_threshold_rad_s)
     starts, stops = alignment_windows(t_st, on, n_min=cfg.window_min, n_max=cfg.window_max)
@@ -277,97 +294,153 @@ def calibrate_gyro(
     rms = np.linalg.norm(windows.residual_rms_rad, axis=1)
     used = rms <= cfg.window_outlier_factor * np.median(rms)
     sel = used[windows.window]
-    t_win, w_A, win = windows.t_s[sel], windows.w_A_rad_s[sel], windows.window[sel]
-    inv_var = 1.0 / windows.rate_variance_s2[sel]
-    w_G_win = spline.rate(t_win)
+    t_win = windows.t_s[sel]
+    win = _Windows(
+        rates=windows, used=used, t_s=t_win, w_A=windows.w_A_rad_s[sel], window=windows.window[sel],
+        inv_var=1.0 / windows.rate_variance_s2[sel], w_G=spline.rate(t_win),
+        st_noise_rad=np.sqrt(np.median(windows.residual_rms_rad[used] ** 2, axis=0)),
+    )
+    return _Context(t_st, q_st, q_nom, plan, win, t_o, lag, cfg)
 
-    def align(drift_model: DriftTrend | None, q_prior: FloatArray, m_prior: float, degree: int) -> AlignmentEstimate:
-        w_g = w_G_win if drift_model is None else w_G_win - drift_model(t_win)
-        try:
-            return estimate_alignment(
-                t_win, w_g, w_A, win, inv_var, q_GS_prior=q_prior, scale_factor_prior=m_prior, q_GS_nominal=q_nom,
-                drift_degree=degree, min_spread=cfg.min_spread, max_sigma_rad=cfg.max_misalignment_sigma_rad,
-            )
-        except AlignmentError as exc:
-            raise CalibrationError(str(exc)) from exc
 
-    # Pass 0: no drift model yet; the drift is a jointly estimated polynomial of the trend degree.
-    report(0.1, "pass 0: alignment and scale factor (QUEST) with a joint drift polynomial")
-    est = align(None, q_nom, 0.0, cfg.trend_degree)
+def _align(
+    ctx: _Context, drift_model: DriftTrend | None, q_prior: FloatArray, m_prior: float, degree: int
+) -> AlignmentEstimate:
+    """Steps 3-4: QUEST alignment and scale factor on the window samples, the drift model subtracted."""
+    win, cfg = ctx.windows, ctx.cfg
+    w_g = win.w_G if drift_model is None else win.w_G - drift_model(win.t_s)
+    try:
+        return estimate_alignment(
+            win.t_s, w_g, win.w_A, win.window, win.inv_var, q_GS_prior=q_prior, scale_factor_prior=m_prior,
+            q_GS_nominal=ctx.q_nom, drift_degree=degree, min_spread=cfg.min_spread,
+            max_sigma_rad=cfg.max_misalignment_sigma_rad,
+        )
+    except AlignmentError as exc:
+        raise CalibrationError(str(exc)) from exc
+
+
+@dataclass(frozen=True)
+class _Pass:
+    """Step 4, one pass: the new estimate, the observer run and its interval rotations, rate map and
+    reference drift, the drift model, the usable samples (corrected, stationary gains), the change in
+    sigmas and the history record."""
+
+    est: AlignmentEstimate
+    obs: DriftObserverResult
+    rot: IntervalRotations
+    rate_map: FloatArray
+    b_ref: FloatArray
+    model: DriftTrend
+    usable: NDArray[np.bool_]
+    change: float
+    record: dict[str, object]
+
+
+def _pass(
+    it: int, ctx: _Context, est: AlignmentEstimate, model: DriftTrend | None, report: Callable[[float, str], None]
+) -> _Pass:
+    """Step 4: eq. 7 integration with the current calibration, drift observer, drift trend, alignment."""
+    cfg, t_st = ctx.cfg, ctx.t_st
+    q_GS, m = est.q_GS, est.scale_factor_error
+    t_mid = 0.5 * (t_st[0] + t_st[-1])
+    b_ref = est.drift_offset(t_mid) + (model(t_mid) if model is not None else 0.0)
+    frac = 0.1 + 0.8 * it / (cfg.max_iterations + 1)
+    report(frac, f"pass {it}: integrating the calibrated gyro (eq. 7)")
+    dcm_SG = rotations.quat_to_dcm(rotations.quat_conjugate(q_GS))
+    rot = interval_rotations(ctx.plan, q_GX=q_GS, scale_factor_error=m, drift=b_ref)
+    on = correction_flags(rot.max_rate_rad_s, rot.valid, cfg.rate_threshold_rad_s)
+    report(frac + 0.3 / cfg.max_iterations, f"pass {it}: drift observer")
+    rate_map = dcm_SG / (1.0 + m)
+    obs = run_drift_observer(
+        t_st, ctx.q_st, rot.q, rot.rotvec_rad, rot.valid, on, rate_map=rate_map, drift_ref_rad_s=b_ref,
+        t_r_s=cfg.t_r_s, xi=cfg.xi, acquisition=cfg.acquisition, trend_window_s=cfg.trend_window_s,
+        trend_degree=cfg.trend_degree,
+    )
+    usable = (obs.mode == MODE_CORRECTED) & obs.stationary
+    if np.count_nonzero(usable) < 2:
+        raise CalibrationError("the drift observer never reached its stationary gains in a calibration interval")
+    new_model = fit_drift_trend(t_st[usable], obs.drift_rad_s[usable], cfg.trend_degree).shifted(ctx.lag)
+    report(frac + 0.6 / cfg.max_iterations, f"pass {it}: alignment and scale factor (QUEST)")
+    new = _align(ctx, new_model, q_GS, m, 0)
+    d_theta = rotations.quat_to_rotvec(rotations.quat_multiply(rotations.quat_conjugate(q_GS), new.q_GS))
+    sig_th = np.sqrt(np.diag(new.misalignment_cov_rad2))
+    change = max(
+        float(np.max(np.abs(d_theta) / np.maximum(sig_th, 1e-300))),
+        abs(new.scale_factor_error - m) / max(new.scale_factor_sigma, 1e-300),
+    )
+    record: dict[str, object] = {
+        "iteration": it, "misalignment_rad": new.misalignment_rad.tolist(),
+        "scale_factor_error": new.scale_factor_error,
+        "drift_offset_rad_s": new.drift_offset(t_st[-1]).tolist(), "change_sigma": change,
+    }
+    return _Pass(new, obs, rot, rate_map, b_ref, new_model, usable, change, record)
+
+
+@dataclass(frozen=True)
+class _Passes:
+    """Step 5: the last pass, the history of every pass (pass 0 first) and whether the changes fell
+    below the tolerance."""
+
+    last: _Pass
+    history: tuple[dict[str, object], ...]
+    converged: bool
+
+
+def _iterate(ctx: _Context, est: AlignmentEstimate, report: Callable[[float, str], None]) -> _Passes:
+    """Steps 4-5: passes until every change is below ``change_tolerance`` sigmas (at most max_iterations)."""
     history: list[dict[str, object]] = [{
         "iteration": 0, "misalignment_rad": est.misalignment_rad.tolist(),
         "scale_factor_error": est.scale_factor_error, "change_sigma": float("inf"),
     }]
-    converged = False
-    obs: DriftObserverResult | None = None
     model: DriftTrend | None = None
-    usable = np.zeros(t_st.size, dtype=bool)
-    for it in range(1, cfg.max_iterations + 1):
-        q_GS, m = est.q_GS, est.scale_factor_error
-        t_mid = 0.5 * (t_st[0] + t_st[-1])
-        b_ref = est.drift_offset(t_mid) + (model(t_mid) if model is not None else 0.0)
-        frac = 0.1 + 0.8 * it / (cfg.max_iterations + 1)
-        report(frac, f"pass {it}: integrating the calibrated gyro (eq. 7)")
-        dcm_SG = rotations.quat_to_dcm(rotations.quat_conjugate(q_GS))
-        rot = interval_rotations(plan, q_GX=q_GS, scale_factor_error=m, drift=b_ref)
-        on = correction_flags(rot.max_rate_rad_s, rot.valid, cfg.rate_threshold_rad_s)
-        report(frac + 0.3 / cfg.max_iterations, f"pass {it}: drift observer")
-        rate_map = dcm_SG / (1.0 + m)
-        obs = run_drift_observer(
-            t_st, q_st, rot.q, rot.rotvec_rad, rot.valid, on, rate_map=rate_map, drift_ref_rad_s=b_ref,
-            t_r_s=cfg.t_r_s, xi=cfg.xi, acquisition=cfg.acquisition, trend_window_s=cfg.trend_window_s,
-            trend_degree=cfg.trend_degree,
-        )
-        usable = (obs.mode == MODE_CORRECTED) & obs.stationary
-        if np.count_nonzero(usable) < 2:
-            raise CalibrationError("the drift observer never reached its stationary gains in a calibration interval")
-        model = fit_drift_trend(t_st[usable], obs.drift_rad_s[usable], cfg.trend_degree).shifted(lag)
-        report(frac + 0.6 / cfg.max_iterations, f"pass {it}: alignment and scale factor (QUEST)")
-        new = align(model, q_GS, m, 0)
-        d_theta = rotations.quat_to_rotvec(rotations.quat_multiply(rotations.quat_conjugate(q_GS), new.q_GS))
-        sig_th = np.sqrt(np.diag(new.misalignment_cov_rad2))
-        change = max(
-            float(np.max(np.abs(d_theta) / np.maximum(sig_th, 1e-300))),
-            abs(new.scale_factor_error - m) / max(new.scale_factor_sigma, 1e-300),
-        )
-        history.append({
-            "iteration": it, "misalignment_rad": new.misalignment_rad.tolist(),
-            "scale_factor_error": new.scale_factor_error,
-            "drift_offset_rad_s": new.drift_offset(t_st[-1]).tolist(), "change_sigma": change,
-        })
-        est = new
-        if change < cfg.change_tolerance:
-            converged = True
-            break
-    assert obs is not None and model is not None
+    last: _Pass | None = None
+    for it in range(1, ctx.cfg.max_iterations + 1):
+        last = _pass(it, ctx, est, model, report)
+        history.append(last.record)
+        est, model = last.est, last.model
+        if last.change < ctx.cfg.change_tolerance:
+            return _Passes(last, tuple(history), True)
+    assert last is not None
+    return _Passes(last, tuple(history), False)
 
-    report(0.92, "drift trend, convergence and slews")
-    corrected = obs.mode == MODE_CORRECTED
+
+@dataclass(frozen=True)
+class _DriftSummary:
+    """The drift at the end of the data [rad/s] (trend of the last window), the noise of the corrected
+    estimates about the whole-span model, and the convergence time [s] (NaN if never)."""
+
+    end_rad_s: FloatArray
+    noise_rad_s: FloatArray
+    convergence_s: float
+
+
+def _drift_summary(ctx: _Context, passes: _Passes) -> _DriftSummary:
+    """The reported drift, its noise and convergence time from the last observer run."""
+    cfg, t_st, p = ctx.cfg, ctx.t_st, passes.last
+    obs, usable, model = p.obs, p.usable, p.model
     last = usable & (t_st >= t_st[-1] - cfg.trend_window_s)
-    end_trend = (fit_drift_trend(t_st[last], obs.drift_rad_s[last], cfg.trend_degree).shifted(lag) if np.any(last)
-                 else model)
-    drift_end = end_trend(t_st[-1])
+    end_trend = (fit_drift_trend(t_st[last], obs.drift_rad_s[last], cfg.trend_degree).shifted(ctx.lag)
+                 if np.any(last) else model)
     dev = obs.drift_rad_s[usable] - model(t_st[usable])
     noise = np.std(dev, axis=0) if dev.shape[0] > 1 else np.full(3, np.nan)
+    corrected = obs.mode == MODE_CORRECTED
     conv = drift_convergence_time(t_st, obs.drift_rad_s, corrected, model(t_st), cfg.convergence_tolerance_rad_s)
-    st_noise = np.sqrt(np.median(windows.residual_rms_rad[used] ** 2, axis=0))
-    att_sd, _ = stationary_noise(t_o, cfg.t_r_s, float(np.sqrt(np.mean(st_noise**2))), cfg.xi)
+    return _DriftSummary(end_trend(t_st[-1]), noise, conv)
+
+
+def _slew_report(ctx: _Context, passes: _Passes, drift_noise_rad_s: FloatArray) -> SlewReport:
+    """Slews of the last observer run with their error bounds from the 3-sigma calibration errors."""
+    cfg, est = ctx.cfg, passes.last.est
+    st_noise = ctx.windows.st_noise_rad
+    att_sd, _ = stationary_noise(ctx.t_o, cfg.t_r_s, float(np.sqrt(np.mean(st_noise**2))), cfg.xi)
     sig_th = np.nan_to_num(est.misalignment_sigma_rad, nan=cfg.max_misalignment_sigma_rad)
     bound_terms = {
         "initial_error_rad": 3.0 * float(np.sqrt(3.0)) * att_sd,
-        "drift_error_rad_s": 3.0 * float(np.linalg.norm(noise)),
+        "drift_error_rad_s": 3.0 * float(np.linalg.norm(drift_noise_rad_s)),
         "scale_factor_error": 3.0 * est.scale_factor_sigma,
         "misalignment_error_rad": 3.0 * float(np.linalg.norm(sig_th)),
     }
-    slews = _slews(obs, rot, bound_terms)
-    report(1.0, "done")
-    return GyroCalibration(
-        alignment=est, drift_rad_s=drift_end, drift_model=model, drift_noise_rad_s=noise,
-        drift_convergence_s=conv, observer=obs, windows=windows, rotations=rot, spline=spline,
-        iterations=history, converged=converged, slews=slews, st_noise_rad=st_noise,
-        integration_error_rad=float(np.max(rot.error_rad)), windows_used=used, observer_rate_map=rate_map,
-        observer_drift_ref_rad_s=b_ref,
-    )
+    return slew_report(passes.last.obs, passes.last.rot, bound_terms)
 
 
 def apply_gyro_calibration(

@@ -13,7 +13,7 @@ a1* = -2 exp(-xi nu T_o) cos(nu T_o sqrt(1 - xi^2))), so that the estimates ente
 initial error within about T_r (:func:`observer_gains`).
 
 Nonlinear form (000, eq. 8). The attitude estimate is a quaternion, propagated over [t_k, t_k+1] by the
-integral of eq. (7) on the calibrated gyro spline (processing.signal.two_pass_filter.interval_rotations), and
+integral of eq. (7) on the calibrated gyro spline (processing.signal.gyro_integration.interval_rotations), and
 corrected by the rotation Q(e, g phi) of the fraction g of the innovation rotation; the drift by
 4 g2 sigma of the innovation. Implementation notes (all equivalent to 000 in the linear limit):
 
@@ -188,7 +188,8 @@ def fit_drift_trend(t_s: ArrayLike, drift: ArrayLike, degree: int, *, min_span_p
     x = (t - t_ref) / scale
     v = x[:, None] ** np.arange(d + 1)
     coef, *_ = np.linalg.lstsq(v, b, rcond=None)
-    return DriftTrend(coefficients=coef, t_ref_s=t_ref, scale_s=scale, span_s=(float(t[0]), float(t[-1])))
+    return DriftTrend(coefficients=np.asarray(coef, dtype=np.float64), t_ref_s=t_ref, scale_s=scale,
+                      span_s=(float(t[0]), float(t[-1])))
 
 
 @dataclass(frozen=True)
@@ -283,7 +284,7 @@ def run_drift_observer(
 
     t_s (K,) [s] increasing sample times; q_meas (K, 4) measured q_IS (frame A = star tracker);
     interval_q (K - 1, 4), interval_rotvec (K - 1, 3), interval_valid (K - 1,): rotation of A over each
-    interval from the calibrated spline corrected with drift_ref_rad_s (two_pass_filter.interval_rotations);
+    interval from the calibrated spline corrected with drift_ref_rad_s (gyro_integration.interval_rotations);
     correction_on (K,) bool: class MT_alpha at the sample (correction allowed).
     rate_map (3, 3): L = dcm_SG / (1 + m^), the map from a gyro-frame rate to the A-frame rate.
     t_r_s, xi: 000's T_r and xi; acquisition: growing-memory gains at start-up (see module docstring).
@@ -291,6 +292,29 @@ def run_drift_observer(
     slews from the trend of the corrected, stationary-gain estimates of the last window.
     Initialised from the first star-tracker quaternion (000). Returns :class:`DriftObserverResult`.
     """
+    inp = _observer_inputs(t_s, q_meas, interval_q, interval_rotvec, interval_valid, correction_on, rate_map)
+    plan = _observer_plan(inp, drift_ref_rad_s, t_r_s, xi)
+    return _observe(inp, plan, acquisition, drift0_rad_s, trend_window_s, trend_degree)
+
+
+@dataclass(frozen=True)
+class _ObserverInputs:
+    """Checked observer inputs (shapes in :func:`run_drift_observer`): t (K,), q_meas (K, 4), the
+    interval rotations, rotation vectors and validity (K - 1, ...), correction_on (K,), rate_map L."""
+
+    t: FloatArray
+    q_meas: FloatArray
+    interval_q: FloatArray
+    interval_rotvec: FloatArray
+    interval_valid: NDArray[np.bool_]
+    on: NDArray[np.bool_]
+    rate_map: FloatArray
+
+
+def _observer_inputs(
+    t_s: ArrayLike, q_meas: ArrayLike, interval_q: ArrayLike, interval_rotvec: ArrayLike,
+    interval_valid: ArrayLike, correction_on: ArrayLike, rate_map: ArrayLike,
+) -> _ObserverInputs:
     t = np.asarray(t_s, dtype=np.float64)
     qm = np.asarray(q_meas, dtype=np.float64)
     k_n = t.size
@@ -309,53 +333,80 @@ def run_drift_observer(
     lmap = np.asarray(rate_map, dtype=np.float64)
     if lmap.shape != (3, 3):
         raise DriftObserverError(f"rate_map must be (3, 3), got {lmap.shape}")
-    mmap = np.linalg.inv(lmap)
-    b_ref = np.asarray(drift_ref_rad_s, dtype=np.float64)
-    t_o = float(np.median(np.diff(t)))
+    return _ObserverInputs(t, qm, iq, irv, ivalid, on, lmap)
+
+
+@dataclass(frozen=True)
+class _ObserverPlan:
+    """Gains (000 eqs. 5-6: g1, g2 and the current-form alpha, beta) at T_o, and per-sample Python rows
+    for the sequential loop: measured quaternions, interval rotations, the per-interval Jacobian-times-map
+    (rotation-vector change per unit drift change, 9 numbers), the inverse rate map M and b_ref."""
+
+    t_o: float
+    g1: float
+    g2: float
+    alpha_s: float
+    beta_s: float
+    qm: list[tuple[float, ...]]
+    iq: list[tuple[float, ...]]
+    jl: list[list[float]]
+    m_rows: list[tuple[float, ...]]
+    b_ref: FloatArray
+
+
+def _observer_plan(inp: _ObserverInputs, drift_ref_rad_s: ArrayLike, t_r_s: float, xi: float) -> _ObserverPlan:
+    m_rows = [tuple(map(float, r)) for r in np.linalg.inv(inp.rate_map)]
+    t_o = float(np.median(np.diff(inp.t)))
     g1, g2 = observer_gains(t_o, t_r_s, xi)
-    alpha_s, beta_s = g1 - t_o * g2, t_o * g2
+    dt = np.diff(inp.t)
+    jac = dt[:, None, None] * (np.eye(3) - 0.5 * rotations.skew(inp.interval_rotvec))
+    jl = -(jac @ inp.rate_map)
+    return _ObserverPlan(
+        t_o=t_o, g1=g1, g2=g2, alpha_s=g1 - t_o * g2, beta_s=t_o * g2,
+        qm=[tuple(map(float, r)) for r in rotations.quat_normalize(inp.q_meas)],
+        iq=[tuple(map(float, r)) for r in inp.interval_q], jl=jl.reshape(-1, 9).tolist(),
+        m_rows=m_rows,
+        b_ref=np.asarray(drift_ref_rad_s, dtype=np.float64),
+    )
 
-    qm_n = rotations.quat_normalize(qm)
-    q_prior = np.empty((k_n, 4))
-    q_post = np.empty((k_n, 4))
-    drift = np.empty((k_n, 3))
-    innov = np.zeros((k_n, 3))
+
+def _propagated(q_hat: tuple[float, ...], b: list[float], plan: _ObserverPlan, k: int) -> tuple[float, ...]:
+    """q^ over interval k - 1: the interval rotation corrected for b^ - b_ref (module docstring)."""
+    row, b_ref = plan.jl[k - 1], plan.b_ref
+    db0, db1, db2 = b[0] - b_ref[0], b[1] - b_ref[1], b[2] - b_ref[2]
+    corr = _exp(row[0] * db0 + row[1] * db1 + row[2] * db2, row[3] * db0 + row[4] * db1 + row[5] * db2,
+                row[6] * db0 + row[7] * db1 + row[8] * db2)
+    return _normalize(_qmul(_qmul(q_hat, plan.iq[k - 1]), corr))
+
+
+def _observe(
+    inp: _ObserverInputs, plan: _ObserverPlan, acquisition: bool, drift0_rad_s: ArrayLike, trend_window_s: float,
+    trend_degree: int,
+) -> DriftObserverResult:
+    """000 eq. 8, sample by sample (a sequential algorithm): propagate, innovation, mode, correction."""
+    t, on, k_n = inp.t, inp.on, inp.t.size
+    q_prior, q_post = np.empty((k_n, 4)), np.empty((k_n, 4))
+    drift, innov = np.empty((k_n, 3)), np.zeros((k_n, 3))
     mode = np.empty(k_n, dtype=np.int8)
-    gain_a = np.zeros(k_n)
-    gain_b = np.zeros(k_n)
+    gain_a, gain_b = np.zeros(k_n), np.zeros(k_n)
     stationary = np.zeros(k_n, dtype=bool)
-    dt = np.diff(t)
-    # Per-interval Jacobian-times-map: rotation-vector change per unit drift change, (K - 1, 3, 3).
-    jac = dt[:, None, None] * (np.eye(3) - 0.5 * rotations.skew(irv))
-    jl = -(jac @ lmap)
-    l_list = [tuple(map(float, r)) for r in mmap]
-    qm_l = [tuple(map(float, r)) for r in qm_n]
-    iq_l = [tuple(map(float, r)) for r in iq]
-    jl_l = jl.reshape(-1, 9).tolist()
-
     b = [float(x) for x in np.asarray(drift0_rad_s, dtype=np.float64)]
-    q_hat = qm_l[0]
-    n_meas = 1
-    n_reacq = 0
-    predicting = False
-    need_reset = True
+    q_hat = plan.qm[0]
+    n_meas, n_reacq = 1, 0
+    predicting, need_reset = False, True
     trend: DriftTrend | None = None
     for k in range(k_n):
         if k > 0:
-            if not ivalid[k - 1]:
+            if not inp.interval_valid[k - 1]:
                 need_reset = True
             else:
-                row = jl_l[k - 1]
-                db0, db1, db2 = b[0] - b_ref[0], b[1] - b_ref[1], b[2] - b_ref[2]
-                corr = _exp(row[0] * db0 + row[1] * db1 + row[2] * db2, row[3] * db0 + row[4] * db1 + row[5] * db2,
-                            row[6] * db0 + row[7] * db1 + row[8] * db2)
-                q_hat = _normalize(_qmul(_qmul(q_hat, iq_l[k - 1]), corr))
+                q_hat = _propagated(q_hat, b, plan, k)
         q_prior[k] = q_hat
-        d = _delta(q_hat, qm_l[k])
+        d = _delta(q_hat, plan.qm[k])
         innov[k] = d
         if k == 0:
             mode[k] = MODE_INIT
-            q_hat = qm_l[k]
+            q_hat = plan.qm[k]
             need_reset = False
         elif not on[k]:
             if not predicting:
@@ -367,33 +418,36 @@ def run_drift_observer(
             mode[k] = MODE_PREDICTED
         elif predicting or need_reset:
             mode[k] = MODE_RESUMED
-            q_hat = qm_l[k]
+            q_hat = plan.qm[k]
             predicting = need_reset = False
             n_reacq = 1
         else:
-            if acquisition and n_reacq and n_reacq + 1 < 1.0 / alpha_s:
-                n_reacq += 1  # re-acquisition after a reset: the mean of the innovations, drift held
-                alpha, beta = 1.0 / n_reacq, 0.0
-            else:
-                n_reacq = 0
-                n_meas += 1
-                if acquisition:
-                    a_n, b_n = acquisition_gains(n_meas)
-                    alpha, beta = max(a_n, alpha_s), max(b_n, beta_s)
-                else:
-                    alpha, beta = alpha_s, beta_s
-            stationary[k] = alpha == alpha_s and beta == beta_s
+            alpha, beta, n_meas, n_reacq = _gains(plan, acquisition, n_meas, n_reacq)
+            stationary[k] = alpha == plan.alpha_s and beta == plan.beta_s
             q_hat = _normalize(_qmul(q_hat, _exp(alpha * d[0], alpha * d[1], alpha * d[2])))
-            f = beta / t_o
-            b = [b[i] - f * (l_list[i][0] * d[0] + l_list[i][1] * d[1] + l_list[i][2] * d[2]) for i in range(3)]
+            f = beta / plan.t_o
+            m = plan.m_rows
+            b = [b[i] - f * (m[i][0] * d[0] + m[i][1] * d[1] + m[i][2] * d[2]) for i in range(3)]
             mode[k] = MODE_CORRECTED
             gain_a[k], gain_b[k] = alpha, f
         q_post[k] = q_hat
         drift[k] = b
     return DriftObserverResult(
         t_s=t, q_prior=q_prior, q_post=q_post, drift_rad_s=drift, innovation_rad=innov, mode=mode,
-        gain_attitude=gain_a, gain_drift_s=gain_b, stationary=stationary, g1=g1, g2=g2,
+        gain_attitude=gain_a, gain_drift_s=gain_b, stationary=stationary, g1=plan.g1, g2=plan.g2,
     )
+
+
+def _gains(plan: _ObserverPlan, acquisition: bool, n_meas: int, n_reacq: int) -> tuple[float, float, int, int]:
+    """(alpha, beta, n_meas, n_reacq) of a correction: re-acquisition after a reset (the mean of the
+    innovations, drift held), growing-memory gains at start-up, else the stationary gains of 000."""
+    if acquisition and n_reacq and n_reacq + 1 < 1.0 / plan.alpha_s:
+        return 1.0 / (n_reacq + 1), 0.0, n_meas, n_reacq + 1
+    n_meas += 1
+    if acquisition:
+        a_n, b_n = acquisition_gains(n_meas)
+        return max(a_n, plan.alpha_s), max(b_n, plan.beta_s), n_meas, 0
+    return plan.alpha_s, plan.beta_s, n_meas, 0
 
 
 def slew_error_bound(

@@ -319,6 +319,31 @@ def propagate(
     (003 §2.2, eqs. 5, 7; §2.3)
     """
     scheme = _check_scheme(scheme)
+    grid = _grid(t_s, w, t_out, rate_jacobian)
+    u_nodes = _node_attitudes(grid, scheme)
+    out = _output_steps(grid, u_nodes, scheme)
+    psi = _pseudo_derivatives(grid, u_nodes, out, scheme) if derivatives else None
+    return Propagation(
+        u_out=np.ascontiguousarray(out.u_out.T),
+        rot_out=np.ascontiguousarray(out.rot.transpose(2, 0, 1)),
+        psi_out=np.zeros((out.k.size, 3, 0)) if psi is None else np.ascontiguousarray(psi.transpose(2, 0, 1)),
+    )
+
+
+@dataclass(frozen=True)
+class _Grid:
+    """Checked inputs, components first: node times t (N,), steps dt (N - 1,), rates wc (3, N), output
+    times t_out (M,), the rate Jacobian (3, m, N) or None (identity, m = 3)."""
+
+    t: FloatArray
+    dt: FloatArray
+    wc: FloatArray
+    t_out: FloatArray
+    jac: FloatArray | None
+    m: int
+
+
+def _grid(t_s: ArrayLike, w: ArrayLike, t_out: ArrayLike, rate_jacobian: ArrayLike | None) -> _Grid:
     t = np.asarray(t_s, dtype=np.float64)
     if t.ndim != 1 or t.size < 2:
         raise GyroPropagationError(f"t_s must have shape (N,) with N >= 2, got {t.shape}")
@@ -344,43 +369,54 @@ def propagate(
             raise GyroPropagationError(f"rate_jacobian must have shape ({n}, 3, m), got {jac_rows.shape}")
         m = jac_rows.shape[2]
         jac = np.ascontiguousarray(jac_rows.transpose(1, 2, 0))  # (3, m, N)
+    return _Grid(t=t, dt=dt, wc=np.ascontiguousarray(wa.T), t_out=to, jac=jac, m=m)
 
-    wc = np.ascontiguousarray(wa.T)  # (3, N)
-    tau = 0.25 * dt
-    u_nodes = np.empty((4, n))
+
+def _node_attitudes(grid: _Grid, scheme: int) -> FloatArray:
+    """U_k (4, N) at the nodes: prefix products of the step quaternions of 003 §2.3."""
+    u_nodes = np.empty((4, grid.t.size))
     u_nodes[:, 0] = (1.0, 0.0, 0.0, 0.0)
-    u_nodes[:, 1:] = _cumprod_cf(_kappa_cf(tau, wc[:, :-1], wc[:, 1:], scheme))
+    u_nodes[:, 1:] = _cumprod_cf(_kappa_cf(0.25 * grid.dt, grid.wc[:, :-1], grid.wc[:, 1:], scheme))
+    return u_nodes
 
-    # Partial steps of the same scheme from the preceding node k to each output time.
-    k = np.clip(np.searchsorted(t, to, side="right") - 1, 0, n - 2)
+
+@dataclass(frozen=True)
+class _Outputs:
+    """Partial steps to the output times: preceding node k (M,), partial step dtp and its fraction f of
+    the interval, rates at both ends (3, M), U at the outputs (4, M) and R(U) (3, 3, M)."""
+
+    k: NDArray[np.intp]
+    dtp: FloatArray
+    f: FloatArray
+    w_k: FloatArray
+    w_o: FloatArray
+    u_out: FloatArray
+    rot: FloatArray
+
+
+def _output_steps(grid: _Grid, u_nodes: FloatArray, scheme: int) -> _Outputs:
+    """Partial steps of the same scheme from the preceding node k to each output time."""
+    t, wc, to = grid.t, grid.wc, grid.t_out
+    k = np.clip(np.searchsorted(t, to, side="right") - 1, 0, t.size - 2)
     dtp = to - t[k]
-    f = dtp / dt[k]
+    f = dtp / grid.dt[k]
     w_k = wc[:, k]
     w_o = (1.0 - f) * w_k + f * wc[:, k + 1]
     u_out = _qmul_cf(u_nodes[:, k], _kappa_cf(0.25 * dtp, w_k, w_o, scheme))
-    rot = _dcm_cf(u_out)
-    if not derivatives:
-        return Propagation(
-            u_out=np.ascontiguousarray(u_out.T),
-            rot_out=np.ascontiguousarray(rot.transpose(2, 0, 1)),
-            psi_out=np.zeros((to.size, 3, 0)),
-        )
+    return _Outputs(k=k, dtp=dtp, f=f, w_k=w_k, w_o=w_o, u_out=u_out, rot=_dcm_cf(u_out))
 
-    # Forcing sums S_k = sum_{j<k} R(U_{j+1}) (A_j D_j + B_j D_{j+1}), (3, m, N).
-    a, b = _jacobians_cf(tau, wc[:, :-1], wc[:, 1:], scheme)
+
+def _pseudo_derivatives(grid: _Grid, u_nodes: FloatArray, out: _Outputs, scheme: int) -> FloatArray:
+    """psi (3, m, M) at the outputs (eq. 7): forcing sums S_k = sum_{j<k} R(U_{j+1}) (A_j D_j + B_j D_{j+1})
+    carried to the preceding node, plus the partial step."""
+    wc, jac, k, f = grid.wc, grid.jac, out.k, out.f
+    a, b = _jacobians_cf(0.25 * grid.dt, wc[:, :-1], wc[:, 1:], scheme)
     g = a + b if jac is None else _matmul_cf(a, jac[:, :, :-1]) + _matmul_cf(b, jac[:, :, 1:])
-    forcing = np.zeros((3, m, n))
+    forcing = np.zeros((3, grid.m, grid.t.size))
     np.cumsum(_matmul_cf(_dcm_cf(u_nodes[:, 1:]), g), axis=-1, out=forcing[:, :, 1:])
-
-    # Pseudo-derivatives across the partial steps from the preceding node k to each output time.
-    ap, bp = _jacobians_cf(0.25 * dtp, w_k, w_o, scheme)
+    ap, bp = _jacobians_cf(0.25 * out.dtp, out.w_k, out.w_o, scheme)
     if jac is None:
         gp = ap + bp
     else:
         gp = _matmul_cf(ap, jac[:, :, k]) + _matmul_cf(bp, (1.0 - f) * jac[:, :, k] + f * jac[:, :, k + 1])
-    psi = _matmul_cf(rot.transpose(1, 0, 2), forcing[:, :, k]) + gp
-    return Propagation(
-        u_out=np.ascontiguousarray(u_out.T),
-        rot_out=np.ascontiguousarray(rot.transpose(2, 0, 1)),
-        psi_out=np.ascontiguousarray(psi.transpose(2, 0, 1)),
-    )
+    return _matmul_cf(out.rot.transpose(1, 0, 2), forcing[:, :, k]) + gp

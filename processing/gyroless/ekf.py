@@ -33,36 +33,37 @@ process noise Q is truncated in our copy of the paper ("Q = diag(3e-3, 3e-3, 3e.
 (tests/processing/test_gyroless_estimation.py).
 
 Per-step algebra is written on plain floats and small numpy arrays (8x8/9x9); one step (predict +
-update) costs ~0.1 ms of CPU, see bench/gyroless_ekf.py.
+update) costs ~0.1 ms of CPU, see bench/gyroless_ekf.py. Layout: the shared filter machinery and the EKF
+of 004 here, the MEKF in processing.gyroless.mekf, running either over the steps (with the initial
+covariance, the TRIAD start and the attitude-error convention) in processing.gyroless.filtering.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import ClassVar, Literal
+from typing import ClassVar
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.linalg.lapack import dpotrf as _dpotrf
 from scipy.linalg.lapack import dtrtri as _dtrtri
 
-from processing.attitude import rotations
 from processing.attitude.rigid_body import RigidBody004, dcm_BO_columns
 
 __all__ = [
-    "FilterRun",
+    "FilterBase",
     "FilterTuning",
     "GyrolessEKF",
-    "GyrolessInputs",
-    "GyrolessMEKF",
-    "attitude_errors_rad",
-    "covariance_sigmas",
-    "run_filter",
-    "triad_q_OB",
+    "UpdateStats",
+    "Vector",
+    "rotate_BO",
+    "tangent_basis",
 ]
 
-FilterKind = Literal["ekf", "mekf"]
+Vector = Sequence[float] | NDArray[np.float64]
+"""A 3-vector as floats or a (3,) array."""
 
 
 @dataclass(frozen=True)
@@ -80,44 +81,6 @@ class FilterTuning:
     torque_noise_psd_N2_m2_s: float = (4e-6) ** 2
     disturbance_walk_psd_N2_m2_s: float = (1e-7) ** 2
     attitude_noise_psd_rad2_s: float = (1e-5) ** 2
-
-
-@dataclass(frozen=True)
-class GyrolessInputs:
-    """Per-step inputs of the filters, K steps (times need not be uniform).
-
-    t_s (K,): time [s] since an epoch. b_O, s_O (K, 3): unit reference field and Sun directions in O.
-    b_B, s_B (K, 3): measured unit directions in B; NaN rows = no measurement at that step.
-    sigma_b_rad, sigma_s_rad (K,): 1-sigma direction noise [rad] per tangent axis.
-    torque_B_N_m (K, 3): known torque in B over [t_k, t_k+1) (e.g. mu x B_measured).
-    w0_rad_s (K,): orbital rate (w_OI^O = (0, -w0, 0)); n2_rad2_s2 (K,): mu / r^3.
-    """
-
-    t_s: NDArray
-    b_O: NDArray
-    b_B: NDArray
-    sigma_b_rad: NDArray
-    s_O: NDArray
-    s_B: NDArray
-    sigma_s_rad: NDArray
-    torque_B_N_m: NDArray
-    w0_rad_s: NDArray
-    n2_rad2_s2: NDArray
-
-    def __post_init__(self) -> None:
-        k = np.shape(self.t_s)[0]
-        for name in ("b_O", "b_B", "s_O", "s_B", "torque_B_N_m"):
-            if np.shape(getattr(self, name)) != (k, 3):
-                raise ValueError(f"{name} must have shape ({k}, 3), got {np.shape(getattr(self, name))}")
-        for name in ("sigma_b_rad", "sigma_s_rad", "w0_rad_s", "n2_rad2_s2"):
-            if np.shape(getattr(self, name)) != (k,):
-                raise ValueError(f"{name} must have shape ({k},), got {np.shape(getattr(self, name))}")
-        if k and np.any(np.diff(self.t_s) <= 0):
-            raise ValueError("t_s must increase strictly")
-
-    @property
-    def n_steps(self) -> int:
-        return int(np.shape(self.t_s)[0])
 
 
 def _dcm_v_dq(q: tuple[float, float, float, float], v: tuple[float, float, float]) -> list[list[float]]:
@@ -143,13 +106,14 @@ def _xi(q: tuple[float, float, float, float]) -> list[list[float]]:
     return [[-q1, -q2, -q3], [q0, -q3, q2], [q3, q0, -q1], [-q2, q1, q0]]
 
 
-def _rotate_BO(cols: tuple, v: ArrayLike) -> tuple[float, float, float]:
+def rotate_BO(cols: tuple, v: Vector) -> tuple[float, float, float]:
+    """dcm_BO v for the columns (c1, c2, c3) of dcm_BO."""
     c1, c2, c3 = cols
-    x, y, z = float(v[0]), float(v[1]), float(v[2])  # type: ignore[index]
+    x, y, z = float(v[0]), float(v[1]), float(v[2])
     return (x * c1[0] + y * c2[0] + z * c3[0], x * c1[1] + y * c2[1] + z * c3[1], x * c1[2] + y * c2[2] + z * c3[2])
 
 
-def _tangent_basis(b: tuple[float, float, float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
+def tangent_basis(b: tuple[float, float, float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
     """Two unit vectors e1, e2 perpendicular to the unit vector b, with e2 = b x e1."""
     bx, by, bz = b
     if abs(bx) < 0.9:  # e1 = normalise(x_hat x b)
@@ -163,7 +127,7 @@ def _tangent_basis(b: tuple[float, float, float]) -> tuple[tuple[float, ...], tu
 
 
 @dataclass
-class _UpdateStats:
+class UpdateStats:
     nis: float = math.nan
     dof: int = 0
     whitened: list[float] = field(default_factory=list)
@@ -172,7 +136,7 @@ class _UpdateStats:
     residual_rad: list[float] = field(default_factory=lambda: [math.nan, math.nan])
 
 
-class _FilterBase:
+class FilterBase:
     """Shared state and bookkeeping. Subclasses define the covariance layout."""
 
     n: ClassVar[int]
@@ -218,8 +182,8 @@ class _FilterBase:
         self.q = (float(q[0]), float(q[1]), float(q[2]), float(q[3]))
         self.tau = (float(x[7]), float(x[8]))
 
-    def _propagate_state(self, dt: float, w0: float, n2: float, torque_B: ArrayLike) -> None:
-        tb = (float(torque_B[0]), float(torque_B[1]), float(torque_B[2]))  # type: ignore[index]
+    def _propagate_state(self, dt: float, w0: float, n2: float, torque_B: Vector) -> None:
+        tb = (float(torque_B[0]), float(torque_B[1]), float(torque_B[2]))
         self.q, self.w = self.body.rk4_step(self.q, self.w, dt, w0, n2, tau_B=tb, tau_O=(self.tau[0], self.tau[1], 0.0))
 
     def _rate_rows(self, n2: float, cols: tuple) -> tuple[list[list[float]], list[list[float]], list[list[float]]]:
@@ -241,7 +205,7 @@ class _FilterBase:
         f_wt = [[ix * c1[0], ix * c2[0]], [iy * c1[1], iy * c2[1]], [iz * c1[2], iz * c2[2]]]
         return f_ww, g, f_wt
 
-    def _gain(self, H: NDArray, y: NDArray, var: list[float], stats: _UpdateStats) -> tuple[NDArray, NDArray]:
+    def _gain(self, H: NDArray, y: NDArray, var: list[float], stats: UpdateStats) -> tuple[NDArray, NDArray]:
         """Correction K y and the covariance after the update, P - P H^T S^-1 H P, with NIS and the
         whitened innovations L^-1 y (S = L L^T) filled into stats."""
         PHt = self.P @ H.T
@@ -260,18 +224,18 @@ class _FilterBase:
 
     def update(
         self,
-        b_B: ArrayLike | None,
-        b_O: ArrayLike,
+        b_B: Vector | None,
+        b_O: Vector,
         sigma_b: float,
-        s_B: ArrayLike | None = None,
-        s_O: ArrayLike | None = None,
+        s_B: Vector | None = None,
+        s_O: Vector | None = None,
         sigma_s: float = math.nan,
-    ) -> _UpdateStats:
+    ) -> UpdateStats:
         """Fuse unit vectors b (field) and s (Sun); either may be None (skipped). 004 eq. (4).
 
         Each filter gives the rows of H and the residuals of one vector (``_vector_rows``) and applies
         the correction to its state (``_correct``)."""
-        stats = _UpdateStats()
+        stats = UpdateStats()
         rows: list[list[float]] = []
         res: list[float] = []
         var: list[float] = []
@@ -293,7 +257,7 @@ class _FilterBase:
         self._correct(dx.tolist())
         return stats
 
-    def _vector_rows(self, cols: tuple, meas: ArrayLike, ref: ArrayLike) -> tuple[list[list[float]], list[float]]:
+    def _vector_rows(self, cols: tuple, meas: Vector, ref: Vector) -> tuple[list[list[float]], list[float]]:
         raise NotImplementedError  # pragma: no cover - overridden
 
     def _correct(self, d: list[float]) -> None:
@@ -307,7 +271,7 @@ class _FilterBase:
         return (self.w[0] + w0 * c2[0], self.w[1] + w0 * c2[1], self.w[2] + w0 * c2[2])
 
 
-class GyrolessEKF(_FilterBase):
+class GyrolessEKF(FilterBase):
     """The EKF of paper 004 (fig. 2): state (w_BI^B (3), q_OB (4), tau_d,x, tau_d,y) (9).
 
     ``predict(dt, w0, n2, torque_B)`` propagates the state by RK4 and P with Phi = I + F dt (004);
@@ -317,7 +281,7 @@ class GyrolessEKF(_FilterBase):
     n = 9
     kind = "ekf"
 
-    def predict(self, dt: float, w0: float, n2: float, torque_B: ArrayLike) -> NDArray:
+    def predict(self, dt: float, w0: float, n2: float, torque_B: Vector) -> NDArray:
         """Propagate over dt [s]; returns the transition matrix Phi (9, 9) used (004: I + F T_s)."""
         F = self.jacobian(w0, n2)
         qa = np.array(self.q)
@@ -367,13 +331,13 @@ class GyrolessEKF(_FilterBase):
         rows.append([0.0] * 9)
         return np.array(rows)
 
-    def _vector_rows(self, cols: tuple, meas: ArrayLike, ref: ArrayLike) -> tuple[list[list[float]], list[float]]:
+    def _vector_rows(self, cols: tuple, meas: Vector, ref: Vector) -> tuple[list[list[float]], list[float]]:
         """Three rows of H (d(R(q) ref)/dq) and the residual meas - R(q) ref of one unit vector (004 eq. 4)."""
-        r = (float(ref[0]), float(ref[1]), float(ref[2]))  # type: ignore[index]
-        pred = _rotate_BO(cols, r)
+        r = (float(ref[0]), float(ref[1]), float(ref[2]))
+        pred = rotate_BO(cols, r)
         z4 = [0.0, 0.0, 0.0]
         rows = [[*z4, *d, 0.0, 0.0] for d in _dcm_v_dq(self.q, r)]
-        return rows, [float(meas[i]) - pred[i] for i in range(3)]  # type: ignore[index]
+        return rows, [float(meas[i]) - pred[i] for i in range(3)]
 
     def _correct(self, d: list[float]) -> None:
         q0, q1, q2, q3 = (a + b for a, b in zip(self.q, d[3:7], strict=True))
@@ -403,274 +367,3 @@ class GyrolessEKF(_FilterBase):
         y = x + dx
         y[3:7] /= math.sqrt(float(y[3:7] @ y[3:7]))
         return y
-
-
-class GyrolessMEKF(_FilterBase):
-    """Multiplicative EKF: error state (dtheta (3, in B), dw_BI (3), dtau_d,x, dtau_d,y) (8).
-
-    q_OB = q_ref o exp(dtheta / 2). ``predict`` uses Phi = I + F dt + (F dt)^2 / 2; ``update`` uses two
-    tangent components per unit vector (R = sigma^2 I2).
-    """
-
-    n = 8
-    kind = "mekf"
-
-    def jacobian(self, w0: float, n2: float) -> NDArray:
-        """Error-state Jacobian F (8, 8) at the current estimate:
-        dtheta' = -[w x] dtheta + dw; dw' = J^-1 (d tau_g/d c3 [c3 x] + [tau_d^B x]) dtheta + F_ww dw + F_wtau dtau."""
-        cols = dcm_BO_columns(self.q)
-        f_ww, g, f_wt = self._rate_rows(n2, cols)
-        c3 = cols[2]
-        tx, ty, tz = _rotate_BO(cols, (self.tau[0], self.tau[1], 0.0))
-        ji = self._jinv
-        # G [c3 x] + J^-1 [tau_d^B x]
-        sk = [[0.0, -c3[2], c3[1]], [c3[2], 0.0, -c3[0]], [-c3[1], c3[0], 0.0]]
-        st = [[0.0, -tz, ty], [tz, 0.0, -tx], [-ty, tx, 0.0]]
-        wx, wy, wz = self.w
-        rows = [
-            [0.0, wz, -wy, 1.0, 0.0, 0.0, 0.0, 0.0],
-            [-wz, 0.0, wx, 0.0, 1.0, 0.0, 0.0, 0.0],
-            [wy, -wx, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0],
-        ]
-        for i in range(3):
-            gi = g[i]
-            f_wt_i = [gi[0] * sk[0][j] + gi[1] * sk[1][j] + gi[2] * sk[2][j] + ji[i] * st[i][j] for j in range(3)]
-            rows.append([*f_wt_i, *f_ww[i], *f_wt[i]])
-        rows.append([0.0] * 8)
-        rows.append([0.0] * 8)
-        return np.array(rows)
-
-    def predict(self, dt: float, w0: float, n2: float, torque_B: ArrayLike) -> NDArray:
-        """Propagate over dt [s]; returns Phi (8, 8)."""
-        F = self.jacobian(w0, n2) * dt
-        self._propagate_state(dt, w0, n2, torque_B)
-        Phi = self._I + F + 0.5 * (F @ F)
-        P = Phi @ self.P @ Phi.T
-        P.flat[self._diag] += self._q_diag(dt)
-        self.P = P
-        return Phi
-
-    def _q_diag(self, dt: float) -> NDArray:
-        """Diagonal of the discrete process noise for a step dt (cached per dt)."""
-        q = self._q_cache.get(dt)
-        if q is None:
-            t = self.tuning
-            q = np.array([*([t.attitude_noise_psd_rad2_s * dt] * 3),
-                          *(ji * ji * t.torque_noise_psd_N2_m2_s * dt for ji in self._jinv),
-                          *([t.disturbance_walk_psd_N2_m2_s * dt] * 2)])
-            self._q_cache[dt] = q
-        return q
-
-    def _vector_rows(self, cols: tuple, meas: ArrayLike, ref: ArrayLike) -> tuple[list[list[float]], list[float]]:
-        """Two rows of H and the residual of one unit vector in the tangent plane of its prediction."""
-        pred = _rotate_BO(cols, ref)
-        e1, e2 = _tangent_basis(pred)
-        mx, my, mz = float(meas[0]), float(meas[1]), float(meas[2])  # type: ignore[index]
-        rows = [[-e2[0], -e2[1], -e2[2], 0.0, 0.0, 0.0, 0.0, 0.0], [e1[0], e1[1], e1[2], 0.0, 0.0, 0.0, 0.0, 0.0]]
-        return rows, [e1[0] * mx + e1[1] * my + e1[2] * mz, e2[0] * mx + e2[1] * my + e2[2] * mz]
-
-    def _correct(self, d: list[float]) -> None:
-        hx, hy, hz = 0.5 * d[0], 0.5 * d[1], 0.5 * d[2]
-        ang = math.sqrt(hx * hx + hy * hy + hz * hz)
-        k = math.sin(ang) / ang if ang > 1e-12 else 1.0
-        e0, e1, e2, e3 = math.cos(ang), k * hx, k * hy, k * hz
-        q0, q1, q2, q3 = self.q
-        n0 = q0 * e0 - q1 * e1 - q2 * e2 - q3 * e3
-        n1 = q0 * e1 + q1 * e0 + q2 * e3 - q3 * e2
-        n2 = q0 * e2 + q2 * e0 + q3 * e1 - q1 * e3
-        n3 = q0 * e3 + q3 * e0 + q1 * e2 - q2 * e1
-        nn = math.sqrt(n0 * n0 + n1 * n1 + n2 * n2 + n3 * n3)
-        self.q = (n0 / nn, n1 / nn, n2 / nn, n3 / nn)
-        self.w = (self.w[0] + d[3], self.w[1] + d[4], self.w[2] + d[5])
-        self.tau = (self.tau[0] + d[6], self.tau[1] + d[7])
-
-    def attitude_cov(self) -> NDArray:
-        return self.P[0:3, 0:3]
-
-    def rate_cov(self) -> NDArray:
-        return self.P[3:6, 3:6]
-
-    @staticmethod
-    def error_between(xa: NDArray, xb: NDArray) -> NDArray:
-        """Error (8) taking xb to xa: (rotation vector of q_b^-1 o q_a, w_a - w_b, tau_a - tau_b)."""
-        w_a0, w_a1, w_a2, a0, a1, a2, a3, t_a0, t_a1 = xa.tolist()
-        w_b0, w_b1, w_b2, b0, b1, b2, b3, t_b0, t_b1 = xb.tolist()
-        # q_b^-1 o q_a
-        d0 = b0 * a0 + b1 * a1 + b2 * a2 + b3 * a3
-        d1 = b0 * a1 - b1 * a0 - (b2 * a3 - b3 * a2)
-        d2 = b0 * a2 - b2 * a0 - (b3 * a1 - b1 * a3)
-        d3 = b0 * a3 - b3 * a0 - (b1 * a2 - b2 * a1)
-        if d0 < 0.0:
-            d0, d1, d2, d3 = -d0, -d1, -d2, -d3
-        sn = math.sqrt(d1 * d1 + d2 * d2 + d3 * d3)
-        s = 2.0 * math.atan2(sn, d0) / sn if sn > 1e-12 else 2.0 / d0  # rotation vector (inverse of exp)
-        return np.array([s * d1, s * d2, s * d3, w_a0 - w_b0, w_a1 - w_b1, w_a2 - w_b2, t_a0 - t_b0, t_a1 - t_b1])
-
-    @staticmethod
-    def apply_error(x: NDArray, dx: NDArray) -> NDArray:
-        """x with the error dx applied: q o exp(dtheta/2) (exact), w + dw, tau + dtau."""
-        d = dx.tolist()
-        w0_, w1_, w2_, q0, q1, q2, q3, t0, t1 = x.tolist()
-        hx, hy, hz = 0.5 * d[0], 0.5 * d[1], 0.5 * d[2]
-        ang = math.sqrt(hx * hx + hy * hy + hz * hz)
-        c = math.cos(ang)
-        k = math.sin(ang) / ang if ang > 1e-12 else 1.0
-        e0, e1, e2, e3 = c, k * hx, k * hy, k * hz
-        n0 = q0 * e0 - q1 * e1 - q2 * e2 - q3 * e3
-        n1 = q0 * e1 + q1 * e0 + q2 * e3 - q3 * e2
-        n2 = q0 * e2 + q2 * e0 + q3 * e1 - q1 * e3
-        n3 = q0 * e3 + q3 * e0 + q1 * e2 - q2 * e1
-        nn = math.sqrt(n0 * n0 + n1 * n1 + n2 * n2 + n3 * n3)
-        return np.array([w0_ + d[3], w1_ + d[4], w2_ + d[5], n0 / nn, n1 / nn, n2 / nn, n3 / nn, t0 + d[6], t1 + d[7]])
-
-
-FILTERS: dict[str, type[GyrolessEKF] | type[GyrolessMEKF]] = {"ekf": GyrolessEKF, "mekf": GyrolessMEKF}
-
-
-@dataclass(frozen=True)
-class FilterRun:
-    """History of a filter pass over K steps.
-
-    kind: "ekf" | "mekf". x_filt (K, 9): (w_BI^B, q_OB, tau_d,x, tau_d,y) after each update;
-    P_filt (K, n, n); x_pred (K, 9), P_pred (K, n, n): predicted for step k from k-1 (k = 0: the
-    initial values); Phi (K, n, n): Phi[k] maps errors at k-1 to k (Phi[0] = I).
-    attitude_sigma_rad, rate_sigma_rad_s (K, 3): 1-sigma from P_filt (attitude about the B axes).
-    nis (K,), nis_dof (K,) (NaN and 0 where no measurement was used), whitened (K, 6): whitened
-    innovation components (NaN padded), used_mag, used_sun (K,) bool; residual_rad (K, 2): angle between
-    the measured and the predicted (prior) field and Sun directions (NaN where not measured).
-    """
-
-    kind: str
-    t_s: NDArray
-    x_filt: NDArray
-    P_filt: NDArray
-    x_pred: NDArray
-    P_pred: NDArray
-    Phi: NDArray
-    attitude_sigma_rad: NDArray
-    rate_sigma_rad_s: NDArray
-    nis: NDArray
-    nis_dof: NDArray
-    whitened: NDArray
-    used_mag: NDArray
-    used_sun: NDArray
-    residual_rad: NDArray
-
-    @property
-    def q_OB(self) -> NDArray:
-        return self.x_filt[:, 3:7]
-
-    @property
-    def omega_BI_B(self) -> NDArray:
-        return self.x_filt[:, 0:3]
-
-    @property
-    def tau_d_O(self) -> NDArray:
-        return self.x_filt[:, 7:9]
-
-
-def initial_covariance(kind: FilterKind, q_OB: ArrayLike, attitude_sigma_rad: float, rate_sigma_rad_s: float,
-                       disturbance_sigma_N_m: float) -> NDArray:
-    """Diagonal initial covariance for a filter kind (attitude error isotropic in B)."""
-    if kind == "mekf":
-        return np.diag([attitude_sigma_rad**2] * 3 + [rate_sigma_rad_s**2] * 3 + [disturbance_sigma_N_m**2] * 2)
-    q0, q1, q2, q3 = (float(v) for v in np.asarray(q_OB, dtype=float) / np.linalg.norm(q_OB))
-    xi = np.array([[-q1, -q2, -q3], [q0, -q3, q2], [q3, q0, -q1], [-q2, q1, q0]])
-    P = np.zeros((9, 9))
-    P[0:3, 0:3] = np.eye(3) * rate_sigma_rad_s**2
-    P[3:7, 3:7] = 0.25 * attitude_sigma_rad**2 * (xi @ xi.T) + 1e-12 * np.eye(4)
-    P[7:9, 7:9] = np.eye(2) * disturbance_sigma_N_m**2
-    return P
-
-
-def run_filter(
-    kind: FilterKind,
-    inputs: GyrolessInputs,
-    J: ArrayLike,
-    q0_OB: ArrayLike,
-    omega0_BI_B: ArrayLike,
-    *,
-    attitude_sigma_rad: float = math.radians(10.0),
-    rate_sigma_rad_s: float = 1e-3,
-    disturbance_sigma_N_m: float = 1e-5,
-    tuning: FilterTuning = FilterTuning(),
-) -> FilterRun:
-    """Run the EKF of 004 ("ekf") or the multiplicative EKF ("mekf") over all steps of ``inputs``.
-
-    q0_OB (4,), omega0_BI_B (3,): initial estimate at inputs.t_s[0], with the given 1-sigma
-    uncertainties (attitude isotropic, rad; rate, rad/s; disturbance, N m). Returns :class:`FilterRun`.
-    """
-    if kind not in FILTERS:
-        raise ValueError(f"kind must be one of {sorted(FILTERS)}, got {kind!r}")
-    cls = FILTERS[kind]
-    P0 = initial_covariance(kind, q0_OB, attitude_sigma_rad, rate_sigma_rad_s, disturbance_sigma_N_m)
-    f = cls(J, q0_OB, omega0_BI_B, P0, tuning)
-    K, n = inputs.n_steps, cls.n
-    x_filt, x_pred = np.empty((K, 9)), np.empty((K, 9))
-    P_filt, P_pred, Phi_all = np.empty((K, n, n)), np.empty((K, n, n)), np.empty((K, n, n))
-    nis, dof = np.full(K, np.nan), np.zeros(K, dtype=np.int64)
-    whitened = np.full((K, 6), np.nan)
-    used_mag, used_sun = np.zeros(K, bool), np.zeros(K, bool)
-    residual = np.full((K, 2), np.nan)
-    t = np.asarray(inputs.t_s, dtype=float)
-    b_ok = np.all(np.isfinite(inputs.b_B), axis=1)
-    s_ok = np.all(np.isfinite(inputs.s_B), axis=1)
-    b_B, b_O, s_B, s_O = inputs.b_B, inputs.b_O, inputs.s_B, inputs.s_O
-    sb, ss = inputs.sigma_b_rad, inputs.sigma_s_rad
-    w0s, n2s, torque = inputs.w0_rad_s, inputs.n2_rad2_s2, inputs.torque_B_N_m
-    eye = np.eye(n)
-    for k in range(K):
-        if k == 0:
-            Phi_all[0] = eye
-        else:
-            Phi_all[k] = f.predict(float(t[k] - t[k - 1]), float(w0s[k - 1]), float(n2s[k - 1]), torque[k - 1])
-        x_pred[k] = f.state()
-        P_pred[k] = f.P
-        st = f.update(b_B[k] if b_ok[k] else None, b_O[k], float(sb[k]),
-                      s_B[k] if s_ok[k] else None, s_O[k], float(ss[k]))
-        if st.dof:
-            nis[k], dof[k] = st.nis, st.dof
-            whitened[k, : len(st.whitened)] = st.whitened
-        used_mag[k], used_sun[k] = st.used_mag, st.used_sun
-        residual[k] = st.residual_rad
-        x_filt[k] = f.state()
-        P_filt[k] = f.P
-    att_sig, rate_sig = covariance_sigmas(kind, x_filt, P_filt)
-    return FilterRun(kind=kind, t_s=t, x_filt=x_filt, P_filt=P_filt, x_pred=x_pred, P_pred=P_pred, Phi=Phi_all,
-                     attitude_sigma_rad=att_sig, rate_sigma_rad_s=rate_sig, nis=nis, nis_dof=dof.astype(float),
-                     whitened=whitened, used_mag=used_mag, used_sun=used_sun, residual_rad=residual)
-
-
-def covariance_sigmas(kind: str, x: NDArray, P: NDArray) -> tuple[NDArray, NDArray]:
-    """1-sigma attitude error about the B axes [rad] and rate [rad/s] (K, 3) from states x (K, 9) and
-    covariances P (K, n, n) of a filter kind (EKF: dtheta = 2 Xi(q)^T dq)."""
-    if kind == "mekf":
-        return np.sqrt(np.einsum("kii->ki", P[:, 0:3, 0:3])), np.sqrt(np.einsum("kii->ki", P[:, 3:6, 3:6]))
-    q0, q1, q2, q3 = (x[:, i] for i in range(3, 7))
-    xi = np.stack([np.stack([-q1, -q2, -q3], -1), np.stack([q0, -q3, q2], -1),
-                   np.stack([q3, q0, -q1], -1), np.stack([-q2, q1, q0], -1)], axis=-2)  # (K, 4, 3)
-    att = 4.0 * np.einsum("kai,kab,kbi->ki", xi, P[:, 3:7, 3:7], xi)
-    return np.sqrt(np.maximum(att, 0.0)), np.sqrt(np.einsum("kii->ki", P[:, 0:3, 0:3]))
-
-
-def triad_q_OB(b_O: ArrayLike, s_O: ArrayLike, b_B: ArrayLike, s_B: ArrayLike) -> NDArray:
-    """Coarse q_OB (4,) from two vector pairs (TRIAD, b primary): dcm_BO b_O = b_B exactly, s_O -> s_B
-    in the plane of b. Vectors (3,) in O and B; used to initialise the filters."""
-    def frame(a: ArrayLike, c: ArrayLike) -> NDArray:
-        a, c = np.asarray(a, dtype=float), np.asarray(c, dtype=float)
-        t1 = a / np.linalg.norm(a)
-        t2 = np.cross(a, c)
-        t2 /= np.linalg.norm(t2)
-        return np.stack([t1, t2, np.cross(t1, t2)], axis=-1)
-
-    dcm_OB = frame(b_O, s_O) @ frame(b_B, s_B).T
-    return rotations.dcm_to_quat(dcm_OB)
-
-
-def attitude_errors_rad(q_OB_est: ArrayLike, q_OB_true: ArrayLike) -> NDArray:
-    """Attitude error rotation vector dtheta (..., 3) [rad] in B: q_true = q_est o exp(dtheta/2).
-
-    The convention of the filters' attitude covariance (NEES uses it directly).
-    """
-    dq = rotations.quat_multiply(rotations.quat_conjugate(q_OB_est), q_OB_true)
-    return rotations.quat_to_rotvec(dq)

@@ -38,7 +38,8 @@ from processing.estimation.consistency import ChiSquareStats, WhitenessStats, ch
 from processing.frames.earth_orientation import EarthOrientation
 from processing.frames.earth_rotation_interp import itrs_to_gcrs_state_interp
 from processing.frames.orbital import dcm_IO_lvlh_004
-from processing.gyroless.ekf import FilterRun, FilterTuning, GyrolessInputs, run_filter, triad_q_OB
+from processing.gyroless.ekf import FilterTuning
+from processing.gyroless.filtering import FilterRun, GyrolessInputs, run_filter, triad_q_OB
 from processing.gyroless.rts_smoother import SmoothedRun, rts_smooth
 from processing.units import MU_EARTH_M3_S2, NS_PER_S, RAD_PER_DEG
 
@@ -213,6 +214,52 @@ def prepare_gyroless_inputs(
     q_BM, q_BS mountings (default identity). Times int64 tai_ns, increasing.
     """
     s = settings
+    steps = _filter_steps(mag_time_tai_ns, mag_M_nT, gnss_time_tai_ns, gnss_r_E_m, gnss_v_E_m_s)  # 1
+    t = steps.time_tai_ns
+    dcm_BM, dcm_BS = _mounting(q_BM, "magnetometer.q_BM"), _mounting(q_BS, "sun_sensor.q_BS")
+    orbit = _orbit_and_references(steps, s.eop)  # 1-3
+    meas = _body_measurements(steps, orbit, dcm_BM, dcm_BS, sun_time_tai_ns, sun_S, s)  # 4
+    torque = _control_torque(t, meas.B_B_nT, torquer_time_tai_ns, torquer_mu_B_A_m2)  # 5
+    notes = [*steps.notes, *meas.notes, *torque.notes]
+    # 6. start at the first step with both vectors
+    both = np.flatnonzero(np.all(np.isfinite(meas.s_B), axis=1))
+    if both.size == 0:
+        raise GyrolessError("no sun-sensor sample matches a magnetometer sample outside the shadow: cannot initialise")
+    k0 = int(both[0])
+    if k0 > 0:
+        notes.append(f"filter starts at the first step with both vectors ({k0} earlier steps dropped)")
+    sl = slice(k0, None)
+    b_O_unit = orbit.B_O / np.linalg.norm(orbit.B_O, axis=1, keepdims=True)
+    if s.initial_angles_deg is not None:
+        q0 = q_OB_from_roll_pitch_yaw_004(*(np.asarray(s.initial_angles_deg, dtype=float) * RAD_PER_DEG))
+    else:
+        q0 = triad_q_OB(b_O_unit[k0], orbit.s_O[k0], meas.b_B[k0], meas.s_B[k0])
+    c2 = rotations.quat_rotate(rotations.quat_conjugate(q0), np.array([0.0, 1.0, 0.0]))
+    inputs = GyrolessInputs(
+        t_s=(t[sl] - t[k0]) / NS_PER_S, b_O=b_O_unit[sl], b_B=meas.b_B[sl], sigma_b_rad=meas.sigma_b_rad[sl],
+        s_O=orbit.s_O[sl], s_B=meas.s_B[sl], sigma_s_rad=meas.sigma_s_rad[sl], torque_B_N_m=torque.torque_B_N_m[sl],
+        w0_rad_s=orbit.w0_rad_s[sl], n2_rad2_s2=orbit.n2_rad2_s2[sl],
+    )
+    return PreparedInputs(time_tai_ns=t[sl], inputs=inputs, q0_OB=q0, omega0_BI_B=-orbit.w0_rad_s[k0] * c2,
+                          dcm_IO=orbit.dcm_IO[sl], w0_rad_s=orbit.w0_rad_s[sl], sun_in_shadow=meas.in_shadow[sl], k0=k0,
+                          notes=notes)
+
+
+@dataclass(frozen=True)
+class _Steps:
+    """Step 1: the filter steps (the valid magnetometer samples inside the GNSS span): times (K,),
+    field b_M (K, 3) nT in the magnetometer frame; the GNSS samples; notes."""
+
+    time_tai_ns: NDArray
+    b_M_nT: NDArray
+    gnss_time_tai_ns: NDArray
+    gnss_r_E_m: NDArray
+    gnss_v_E_m_s: NDArray
+    notes: tuple[str, ...]
+
+
+def _filter_steps(mag_time_tai_ns: ArrayLike, mag_M_nT: ArrayLike, gnss_time_tai_ns: ArrayLike,
+                  gnss_r_E_m: ArrayLike, gnss_v_E_m_s: ArrayLike) -> _Steps:
     notes: list[str] = []
     t_mag = np.asarray(mag_time_tai_ns, dtype=np.int64)
     b_M = np.asarray(mag_M_nT, dtype=float)
@@ -230,11 +277,29 @@ def prepare_gyroless_inputs(
     t, b_M = t_mag[keep], b_M[keep]
     if t.size < 3:
         raise GyrolessError(f"need >= 3 magnetometer samples inside the GNSS span, got {t.size}")
-    dcm_BM, dcm_BS = _mounting(q_BM, "magnetometer.q_BM"), _mounting(q_BS, "sun_sensor.q_BS")
+    return _Steps(t, b_M, t_gnss, r_g, v_g, tuple(notes))
 
-    # orbit, frames, references
-    r_E, v_E = hermite_state(t_gnss, r_g, v_g, t)
-    r_I, v_I, dcm_EI = itrs_to_gcrs_state_interp(r_E, v_E, t, s.eop)
+
+@dataclass(frozen=True)
+class _Orbit:
+    """Steps 1-3 per filter step: inertial position r_I (K, 3) m, dcm_IO (K, 3, 3) of the orbital frame,
+    w0 (K,) rad/s, n^2 (K,) rad^2/s^2, IGRF field B_O (K, 3) nT and the Sun direction s_O (K, 3) in O,
+    the visible fraction of the solar disc (K,)."""
+
+    r_I: NDArray
+    dcm_IO: NDArray
+    w0_rad_s: NDArray
+    n2_rad2_s2: NDArray
+    B_O: NDArray
+    s_O: NDArray
+    sunlit: NDArray
+
+
+def _orbit_and_references(steps: _Steps, eop: EarthOrientation) -> _Orbit:
+    """Hermite-interpolated GNSS orbit in the GCRS, the orbital frame of 004, IGRF-14 field and the Sun."""
+    t = steps.time_tai_ns
+    r_E, v_E = hermite_state(steps.gnss_time_tai_ns, steps.gnss_r_E_m, steps.gnss_v_E_m_s, t)
+    r_I, v_I, dcm_EI = itrs_to_gcrs_state_interp(r_E, v_E, t, eop)
     dcm_IO = dcm_IO_lvlh_004(r_I, v_I)
     rr = np.linalg.norm(r_I, axis=1)
     w0 = np.linalg.norm(np.cross(r_I, v_I), axis=1) / rr**2
@@ -245,10 +310,31 @@ def prepare_gyroless_inputs(
     s_I = sun_pos - r_I
     s_I /= np.linalg.norm(s_I, axis=1, keepdims=True)
     s_O = np.einsum("kji,kj->ki", dcm_IO, s_I)
-    lit = sunlit_fraction(r_I, sun_pos)
+    return _Orbit(r_I, dcm_IO, w0, n2, B_O, s_O, sunlit_fraction(r_I, sun_pos))
 
-    # measurements in B
-    B_B = b_M @ dcm_BM.T  # nT
+
+@dataclass(frozen=True)
+class _Measurements:
+    """Step 4: field B_B (K, 3) nT in B, its unit vector b_B, the matched Sun direction s_B (K, 3) (NaN
+    where none), in_shadow (K,), direction noise sigma_b, sigma_s (K,) rad, notes."""
+
+    B_B_nT: NDArray
+    b_B: NDArray
+    s_B: NDArray
+    in_shadow: NDArray
+    sigma_b_rad: NDArray
+    sigma_s_rad: NDArray
+    notes: tuple[str, ...]
+
+
+def _body_measurements(
+    steps: _Steps, orbit: _Orbit, dcm_BM: NDArray, dcm_BS: NDArray, sun_time_tai_ns: ArrayLike, sun_S: ArrayLike,
+    s: GyrolessSettings,
+) -> _Measurements:
+    """Measurements in B; sun samples matched to the steps (nearest within half a step), shadow excluded."""
+    t = steps.time_tai_ns
+    notes: list[str] = []
+    B_B = steps.b_M_nT @ dcm_BM.T  # nT
     B_norm = np.linalg.norm(B_B, axis=1)
     b_B = B_B / B_norm[:, None]
     s_B = np.full((t.size, 3), np.nan)
@@ -264,48 +350,38 @@ def prepare_gyroless_inputs(
         vec = sun[j] @ dcm_BS.T
         nrm = np.linalg.norm(vec, axis=1)
         near &= np.isfinite(nrm) & (nrm > 0)
-        in_shadow = near & (lit < 1.0)
+        in_shadow = near & (orbit.sunlit < 1.0)
         use = near & ~in_shadow
         s_B[use] = vec[use] / nrm[use, None]
         if np.any(in_shadow):
             notes.append(f"{int(in_shadow.sum())} sun-sensor samples in the Earth's shadow/penumbra (conical model) "
                          "ignored")
-    sun_ok = np.all(np.isfinite(s_B), axis=1)
     sigma_b = np.sqrt(s.magnetometer_noise_nT**2 + s.field_model_error_nT**2) / B_norm
     sigma_s = np.full(t.size, max(s.sun_sensor_noise_deg, 1e-3) * RAD_PER_DEG)
+    return _Measurements(B_B, b_B, s_B, in_shadow, sigma_b, sigma_s, tuple(notes))
 
-    # known control torque
+
+@dataclass(frozen=True)
+class _Torque:
+    """Step 5: the known control torque (K, 3) N m in B and a note when it is not modelled."""
+
+    torque_B_N_m: NDArray
+    notes: tuple[str, ...]
+
+
+def _control_torque(t: NDArray, B_B_nT: NDArray, torquer_time_tai_ns: ArrayLike | None,
+                    torquer_mu_B_A_m2: ArrayLike | None) -> _Torque:
+    """Magnetorquer dipole (zero-order hold of the last command) x measured field."""
     torque = np.zeros((t.size, 3))
-    if torquer_time_tai_ns is not None and torquer_mu_B_A_m2 is not None and len(torquer_time_tai_ns):
-        t_tq = np.asarray(torquer_time_tai_ns, dtype=np.int64)
-        mu = np.asarray(torquer_mu_B_A_m2, dtype=float).reshape(-1, 3)
-        i = np.searchsorted(t_tq, t, side="right") - 1
-        has = i >= 0
-        torque[has] = np.cross(mu[i[has]], B_B[has] * 1e-9)
-    else:
-        notes.append("no magnetorquer telemetry: control torques are not modelled (raise the torque noise if the "
-                     "spacecraft was actively controlled)")
-
-    # start at the first step with both vectors
-    both = np.flatnonzero(sun_ok)
-    if both.size == 0:
-        raise GyrolessError("no sun-sensor sample matches a magnetometer sample outside the shadow: cannot initialise")
-    k0 = int(both[0])
-    if k0 > 0:
-        notes.append(f"filter starts at the first step with both vectors ({k0} earlier steps dropped)")
-    sl = slice(k0, None)
-    b_O_unit = B_O / np.linalg.norm(B_O, axis=1, keepdims=True)
-    if s.initial_angles_deg is not None:
-        q0 = q_OB_from_roll_pitch_yaw_004(*(np.asarray(s.initial_angles_deg, dtype=float) * RAD_PER_DEG))
-    else:
-        q0 = triad_q_OB(b_O_unit[k0], s_O[k0], b_B[k0], s_B[k0])
-    c2 = rotations.quat_rotate(rotations.quat_conjugate(q0), np.array([0.0, 1.0, 0.0]))
-    inputs = GyrolessInputs(
-        t_s=(t[sl] - t[k0]) / NS_PER_S, b_O=b_O_unit[sl], b_B=b_B[sl], sigma_b_rad=sigma_b[sl], s_O=s_O[sl],
-        s_B=s_B[sl], sigma_s_rad=sigma_s[sl], torque_B_N_m=torque[sl], w0_rad_s=w0[sl], n2_rad2_s2=n2[sl],
-    )
-    return PreparedInputs(time_tai_ns=t[sl], inputs=inputs, q0_OB=q0, omega0_BI_B=-w0[k0] * c2,
-                          dcm_IO=dcm_IO[sl], w0_rad_s=w0[sl], sun_in_shadow=in_shadow[sl], k0=k0, notes=notes)
+    if torquer_time_tai_ns is None or torquer_mu_B_A_m2 is None or not np.size(torquer_time_tai_ns):
+        return _Torque(torque, ("no magnetorquer telemetry: control torques are not modelled (raise the torque noise "
+                                "if the spacecraft was actively controlled)",))
+    t_tq = np.asarray(torquer_time_tai_ns, dtype=np.int64)
+    mu = np.asarray(torquer_mu_B_A_m2, dtype=float).reshape(-1, 3)
+    i = np.searchsorted(t_tq, t, side="right") - 1
+    has = i >= 0
+    torque[has] = np.cross(mu[i[has]], B_B_nT[has] * 1e-9)
+    return _Torque(torque, ())
 
 
 def estimate_gyroless_attitude(

@@ -1,7 +1,7 @@
 """Rauch-Tung-Striebel fixed-interval smoother for the gyroless filters (post-processing of 004).
 
 What a ground service can do that the on-board filter of 004 cannot: use the measurements after
-each instant too. Backward pass over a :class:`processing.gyroless.ekf.FilterRun` (Rauch, Tung &
+each instant too. Backward pass over a :class:`processing.gyroless.filtering.FilterRun` (Rauch, Tung &
 Striebel 1965; for the multiplicative error state e.g. Crassidis & Junkins, Optimal Estimation of
 Dynamic Systems, 2nd ed., §5.5 and §7.2):
 
@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from processing.gyroless.ekf import FILTERS, FilterRun, covariance_sigmas
+from processing.gyroless.filtering import FILTERS, FilterRun, covariance_sigmas
 
 __all__ = ["SmoothedRun", "rts_smooth"]
 

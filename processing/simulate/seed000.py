@@ -338,105 +338,148 @@ def simulate_seed000(
     Returns :class:`Scenario000`.
     """
     parameters = {k: v for k, v in locals().items() if k != "parameters"}
-    h_s = GYRO_PERIOD_NS / NS_PER_S
-    _check(duration_s > 0, f"duration_s must be > 0, got {duration_s}")
-    st_period_ns = int(round(st_period_s * NS_PER_S))
-    _check(
-        st_period_ns > 0 and st_period_ns % GYRO_PERIOD_NS == 0,
-        f"st_period_s must be a positive multiple of the gyro period 1/128 s, got {st_period_s}",
-    )
-    _check(altitude_m > 0, f"altitude_m must be > 0, got {altitude_m}")
-    _check(initial_hold_s >= 0, f"initial_hold_s must be >= 0, got {initial_hold_s}")
-    for name in ("slew_duration_s", "slew_peak_rate_rad_s", "scan_duration_s", "scan_peak_rate_rad_s",
-                 "hold_duration_s"):
-        lo, hi = parameters[name]
-        _check(0 <= lo <= hi, f"{name} must be a range (lo, hi) with 0 <= lo <= hi, got {parameters[name]!r}")
-    _check(slew_duration_s[0] > 0 and scan_duration_s[0] > 0, "slew and scan durations must be > 0")
-    for name in ("drift_rad_s", "drift_rate_rad_s2", "st_noise_std_rad"):
-        _check(np.shape(parameters[name]) == (3,), f"{name} must have 3 components, got {parameters[name]!r}")
-    _check(misalignment_rad is None or np.shape(misalignment_rad) == (3,),
-           f"misalignment_rad must have 3 components, got {misalignment_rad!r}")
-    _check(scale_factor_error is None or abs(scale_factor_error) < 0.1,
-           f"scale_factor_error must be below 0.1 in magnitude, got {scale_factor_error}")
-    _check(gyro_noise_std_rad >= 0 and min(st_noise_std_rad) >= 0, "noise standard deviations must be >= 0")
-
+    _check_parameters(parameters)
     rng_plan, rng_st, rng_gyro, rng_cal = (Generator(PCG64(s)) for s in SeedSequence(seed).spawn(4))
-    if misalignment_rad is None:
-        signs = rng_cal.choice([-1.0, 1.0], size=3)
-        misalignment_rad = tuple((signs * rng_cal.uniform(20.0, 60.0, size=3) * RAD_PER_ARCSEC).tolist())
-    if scale_factor_error is None:
-        scale_factor_error = float(rng_cal.choice([-1.0, 1.0]) * rng_cal.uniform(0.001, 0.005))
-    parameters.update(misalignment_rad=misalignment_rad, scale_factor_error=scale_factor_error)
-
+    cal = _calibration_errors(misalignment_rad, scale_factor_error, rng_cal)
+    parameters.update(misalignment_rad=cal.misalignment_rad, scale_factor_error=cal.scale_factor_error)
     a_m = R_EARTH_M + altitude_m
     inc = float(sun_synchronous_inclination_rad(a_m))
-    n = float(mean_motion_rad_s(a_m))
     plan = plan_maneuvers(
-        duration_s, rng_plan, mean_motion=n, initial_hold_s=initial_hold_s, slew_duration_s=slew_duration_s,
-        slew_peak_rate_rad_s=slew_peak_rate_rad_s, scan_duration_s=scan_duration_s,
+        duration_s, rng_plan, mean_motion=float(mean_motion_rad_s(a_m)), initial_hold_s=initial_hold_s,
+        slew_duration_s=slew_duration_s, slew_peak_rate_rad_s=slew_peak_rate_rad_s, scan_duration_s=scan_duration_s,
         scan_peak_rate_rad_s=scan_peak_rate_rad_s, hold_duration_s=hold_duration_s,
     )
     start = np.int64(start_tai_ns)
     q_BS = rotations.quat_canonical(Q_BS_000)
-    q_GS = rotations.quat_canonical(rotations.rotvec_to_quat(np.asarray(misalignment_rad, dtype=float)))
     drift0 = np.asarray(drift_rad_s, dtype=float)
     drift_rate = np.asarray(drift_rate_rad_s2, dtype=float)
+    gyro = _gyro_stream(start, duration_s, plan, q_BS, cal, drift0, drift_rate, gyro_noise_std_rad, rng_gyro)
+    st = _star_tracker_stream(start, duration_s, int(round(st_period_s * NS_PER_S)), plan, q_BS,
+                              (a_m, inc, raan_rad, u0_rad), st_noise_std_rad, rng_st)
+    config = {"star_trackers": {ST_SENSOR: {"q_BS": q_BS.tolist()}}, "gyro": {"q_BG": q_BS.tolist()}}
+    truth = Truth000(
+        start_tai_ns=int(start), plan=plan, a_m=a_m, inc_rad=inc, raan_rad=raan_rad, u0_rad=u0_rad, q_BS=q_BS,
+        q_GS=cal.q_GS, misalignment_rad=rotations.quat_to_rotvec(cal.q_GS),
+        scale_factor_error=float(cal.scale_factor_error), drift0_rad_s=drift0, drift_rate_rad_s2=drift_rate,
+        gyro_noise_std_rad=float(gyro_noise_std_rad), st_noise_std_rad=np.asarray(st_noise_std_rad, dtype=float),
+        st_time_tai_ns=st.time_tai_ns, q_IB_st=st.q_IB, q_IS_st=st.q_IS_true, w_S_st=st.w_S,
+        st_noise_rotvec_S=st.noise_S, gyro_time_tai_ns=gyro.time_tai_ns, gyro_period_s=gyro.period_s,
+    )
+    streams = {"star_tracker": st.columns(), "gyro_increments": gyro.columns()}
+    return Scenario000(streams=streams, config=config, truth=truth, parameters=parameters)
 
-    # Gyro increments (eq. 1), ending at start + s T_q.
+
+def _check_parameters(p: dict[str, Any]) -> None:
+    """The parameter domains of :func:`simulate_seed000` (Seed000ParameterError naming the parameter)."""
+    _check(p["duration_s"] > 0, f"duration_s must be > 0, got {p['duration_s']}")
+    st_period_ns = int(round(p["st_period_s"] * NS_PER_S))
+    _check(
+        st_period_ns > 0 and st_period_ns % GYRO_PERIOD_NS == 0,
+        f"st_period_s must be a positive multiple of the gyro period 1/128 s, got {p['st_period_s']}",
+    )
+    _check(p["altitude_m"] > 0, f"altitude_m must be > 0, got {p['altitude_m']}")
+    _check(p["initial_hold_s"] >= 0, f"initial_hold_s must be >= 0, got {p['initial_hold_s']}")
+    for name in ("slew_duration_s", "slew_peak_rate_rad_s", "scan_duration_s", "scan_peak_rate_rad_s",
+                 "hold_duration_s"):
+        lo, hi = p[name]
+        _check(0 <= lo <= hi, f"{name} must be a range (lo, hi) with 0 <= lo <= hi, got {p[name]!r}")
+    _check(p["slew_duration_s"][0] > 0 and p["scan_duration_s"][0] > 0, "slew and scan durations must be > 0")
+    for name in ("drift_rad_s", "drift_rate_rad_s2", "st_noise_std_rad"):
+        _check(np.shape(p[name]) == (3,), f"{name} must have 3 components, got {p[name]!r}")
+    _check(p["misalignment_rad"] is None or np.shape(p["misalignment_rad"]) == (3,),
+           f"misalignment_rad must have 3 components, got {p['misalignment_rad']!r}")
+    _check(p["scale_factor_error"] is None or abs(p["scale_factor_error"]) < 0.1,
+           f"scale_factor_error must be below 0.1 in magnitude, got {p['scale_factor_error']}")
+    _check(p["gyro_noise_std_rad"] >= 0 and min(p["st_noise_std_rad"]) >= 0, "noise standard deviations must be >= 0")
+
+
+@dataclass(frozen=True)
+class _Calibration:
+    """The true misalignment (rotation vector of q_GS, rad, and q_GS) and scale-factor error."""
+
+    misalignment_rad: tuple[float, float, float]
+    scale_factor_error: float
+    q_GS: NDArray
+
+
+def _calibration_errors(misalignment_rad: tuple[float, float, float] | None, scale_factor_error: float | None,
+                        rng: Generator) -> _Calibration:
+    """The given errors, or drawn: each misalignment component +-U(20, 60) arcsec, m = +-U(0.1, 0.5) %."""
+    if misalignment_rad is None:
+        signs = rng.choice([-1.0, 1.0], size=3)
+        drawn = (signs * rng.uniform(20.0, 60.0, size=3) * RAD_PER_ARCSEC).tolist()
+        misalignment_rad = (drawn[0], drawn[1], drawn[2])
+    if scale_factor_error is None:
+        scale_factor_error = float(rng.choice([-1.0, 1.0]) * rng.uniform(0.001, 0.005))
+    q_GS = rotations.quat_canonical(rotations.rotvec_to_quat(np.asarray(misalignment_rad, dtype=float)))
+    return _Calibration(misalignment_rad, scale_factor_error, q_GS)
+
+
+@dataclass(frozen=True)
+class _GyroStream:
+    """Gyro increments (eq. 1) ending at time_tai_ns (N,), (N, 3) rad in G, every period_s."""
+
+    time_tai_ns: NDArray
+    increments: NDArray
+    period_s: float
+
+    def columns(self) -> dict[str, NDArray]:
+        n = self.time_tai_ns.size
+        return {
+            "time_tai_ns": self.time_tai_ns,
+            **{c: self.increments[:, i].copy() for i, c in enumerate(("dax", "day", "daz"))},
+            "interval_s": np.full(n, self.period_s),
+            "sensor": np.full(n, GYRO_SENSOR, dtype=object),
+        }
+
+
+def _gyro_stream(
+    start: np.int64, duration_s: float, plan: ManeuverPlan, q_BS: NDArray, cal: _Calibration, drift0: NDArray,
+    drift_rate: NDArray, noise_std_rad: float, rng: Generator,
+) -> _GyroStream:
+    """Gyro increments (eq. 1), ending at start + s T_q, s = 1..N, with white noise."""
+    h_s = GYRO_PERIOD_NS / NS_PER_S
     n_gyro = int(np.floor(duration_s * NS_PER_S / GYRO_PERIOD_NS + 1e-9))
     steps = np.arange(1, n_gyro + 1, dtype=np.int64)
     gyro_time = start + steps * np.int64(GYRO_PERIOD_NS)
     t_gyro = (steps * GYRO_PERIOD_NS).astype(np.float64) / NS_PER_S
-    incr = _gyro_increments(plan, t_gyro, h_s, q_BS, q_GS, scale_factor_error, drift0, drift_rate)
-    incr += rng_gyro.standard_normal(incr.shape) * gyro_noise_std_rad
+    incr = _gyro_increments(plan, t_gyro, h_s, q_BS, cal.q_GS, cal.scale_factor_error, drift0, drift_rate)
+    incr += rng.standard_normal(incr.shape) * noise_std_rad
+    return _GyroStream(gyro_time, incr, h_s)
 
-    # Star tracker: q_IS = q_IB o q_BS o exp(noise about the sensor axes).
+
+@dataclass(frozen=True)
+class _StarTrackerStream:
+    """Star-tracker samples: times (K,), measured q_IS, true q_IB and q_IS (K, 4), the noise rotation
+    vectors about the sensor axes and the true rate w_S (K, 3)."""
+
+    time_tai_ns: NDArray
+    q_IS: NDArray
+    q_IB: NDArray
+    q_IS_true: NDArray
+    noise_S: NDArray
+    w_S: NDArray
+
+    def columns(self) -> dict[str, NDArray]:
+        return {
+            "time_tai_ns": self.time_tai_ns,
+            **{f"q{i}": self.q_IS[:, i].copy() for i in range(4)},
+            "sensor": np.full(self.time_tai_ns.size, ST_SENSOR, dtype=object),
+        }
+
+
+def _star_tracker_stream(
+    start: np.int64, duration_s: float, st_period_ns: int, plan: ManeuverPlan, q_BS: NDArray,
+    orbit: tuple[float, float, float, float], noise_std_rad: tuple[float, float, float], rng: Generator,
+) -> _StarTrackerStream:
+    """q_IS = q_IB o q_BS o exp(noise about the sensor axes) at start + k T_o, k = 0..K; orbit (a, i, RAAN, u0)."""
     n_st = int(np.floor(duration_s * NS_PER_S / st_period_ns + 1e-9)) + 1
     st_k = np.arange(n_st, dtype=np.int64)
     st_time = start + st_k * np.int64(st_period_ns)
     t_st = (st_k * st_period_ns).astype(np.float64) / NS_PER_S
-    r_I, v_I = circular_orbit_state(t_st, a_m, inc, raan_rad, u0_rad)
+    r_I, v_I = circular_orbit_state(t_st, *orbit)
     q_IB = rotations.quat_canonical(rotations.quat_multiply(q_IO_003(r_I, v_I), plan.q_OB(t_st)))
     q_IS_true = rotations.quat_canonical(rotations.quat_multiply(q_IB, q_BS))
-    noise_S = rng_st.standard_normal((n_st, 3)) * np.asarray(st_noise_std_rad, dtype=float)
+    noise_S = rng.standard_normal((n_st, 3)) * np.asarray(noise_std_rad, dtype=float)
     q_IS = rotations.quat_canonical(rotations.quat_multiply(q_IS_true, rotations.rotvec_to_quat(noise_S)))
-    w_S = plan.w_X(t_st, q_BS)
-
-    streams = {
-        "star_tracker": {
-            "time_tai_ns": st_time,
-            **{f"q{i}": q_IS[:, i].copy() for i in range(4)},
-            "sensor": np.full(n_st, ST_SENSOR, dtype=object),
-        },
-        "gyro_increments": {
-            "time_tai_ns": gyro_time,
-            **{c: incr[:, i].copy() for i, c in enumerate(("dax", "day", "daz"))},
-            "interval_s": np.full(n_gyro, h_s),
-            "sensor": np.full(n_gyro, GYRO_SENSOR, dtype=object),
-        },
-    }
-    config = {"star_trackers": {ST_SENSOR: {"q_BS": q_BS.tolist()}}, "gyro": {"q_BG": q_BS.tolist()}}
-    truth = Truth000(
-        start_tai_ns=int(start),
-        plan=plan,
-        a_m=a_m,
-        inc_rad=inc,
-        raan_rad=raan_rad,
-        u0_rad=u0_rad,
-        q_BS=q_BS,
-        q_GS=q_GS,
-        misalignment_rad=rotations.quat_to_rotvec(q_GS),
-        scale_factor_error=float(scale_factor_error),
-        drift0_rad_s=drift0,
-        drift_rate_rad_s2=drift_rate,
-        gyro_noise_std_rad=float(gyro_noise_std_rad),
-        st_noise_std_rad=np.asarray(st_noise_std_rad, dtype=float),
-        st_time_tai_ns=st_time,
-        q_IB_st=q_IB,
-        q_IS_st=q_IS_true,
-        w_S_st=w_S,
-        st_noise_rotvec_S=noise_S,
-        gyro_time_tai_ns=gyro_time,
-        gyro_period_s=h_s,
-    )
-    return Scenario000(streams=streams, config=config, truth=truth, parameters=parameters)
+    return _StarTrackerStream(st_time, q_IS, q_IB, q_IS_true, noise_S, plan.w_X(t_st, q_BS))

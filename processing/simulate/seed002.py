@@ -198,23 +198,79 @@ def simulate_seed002(
     Returns :class:`Scenario002`.
     """
     parameters = {k: v for k, v in locals().items() if k not in ("nav", "parameters")}
-    _check(duration_s > 10 * period_s, f"duration_s must exceed 10 periods, got {duration_s}")
-    _check(period_s > 0 and visibility_period_s > 0, "periods must be > 0")
-    _check(altitude_m > 100e3, f"altitude_m must be > 100 km, got {altitude_m}")
-    for name in ("gnss_fault_fraction", "magnetometer_fault_fraction", "panel_fault_fraction",
-                 "visibility_miss_probability"):
-        _check(0.0 <= parameters[name] < 0.04, f"{name} must be in [0, 0.04), got {parameters[name]}")
-    _check(min(magnetometer_noise_nT, current_noise_a, gnss_position_noise_m, gnss_velocity_noise_m_s) >= 0,
-           "noise levels must be >= 0")
-    _check(0 < cone_half_angle_rad < np.pi, "cone_half_angle_rad must be in (0, pi)")
+    _check_parameters(parameters)
     (rng_att, rng_mag, rng_cur, rng_gnss, rng_vis, rng_fg, rng_fm, rng_fp) = (
         Generator(PCG64(s)) for s in SeedSequence(seed).spawn(8))
     start = int(iso_to_tai_ns([DEFAULT_START_UTC])[0]) if start_tai_ns is None else int(start_tai_ns)
     n = int(np.floor(duration_s / period_s + 1e-9)) + 1
-    t_s = np.arange(n) * period_s
+    t_s = np.asarray(np.arange(n) * period_s, dtype=np.float64)
     time_ns = start + np.round(t_s * NS_PER_S).astype(np.int64)
+    orbit = _orbit(start, t_s, time_ns, altitude_m, ltan_h, u0_rad)
+    att = _attitude(t_s, pitch_mean_rad, pitch_amplitude_rad, yaw_amplitude_rad, roll_rate_rad_s, rng_att)
+    env = _environment(orbit, time_ns)
+    q_BM_arr = rotations.quat_normalize(np.asarray(q_BM, dtype=float))
+    b_M = _magnetometer(att, env, q_BM_arr, magnetometer_noise_nT, rng_mag)
+    cur = _panel_currents(att, env, max_current_a, current_noise_a, rng_cur)
+    gnss_r = orbit.r_E + rng_gnss.standard_normal((n, 3)) * gnss_position_noise_m
+    gnss_v = orbit.v_E + rng_gnss.standard_normal((n, 3)) * gnss_velocity_noise_m_s
+    a_B = _unit(np.asarray(antenna_axis_B, dtype=float))
+    antenna_O = np.einsum("nji,j->ni", att.dcm_BO, a_B)
+    vis = _visibility(nav, orbit, time_ns, antenna_O, visibility_period_s / period_s, cone_half_angle_rad,
+                      visibility_miss_probability, rng_vis)
+    gf = _gnss_faults(gnss_r, gnss_v, gnss_fault_fraction, rng_fg)
+    mf = _magnetometer_faults(b_M, magnetometer_fault_fraction, rng_fm)
+    pf = _panel_faults(cur, panel_fault_fraction, max_current_a, rng_fp)
+    streams = _streams002(time_ns, gf.r, gf.v, mf.values, pf.values, vis)
+    faults = {"gnss": gf.fault, "magnetometer": mf.fault, "panel_currents": pf.fault.reshape(-1),
+              "gnss_visibility": np.zeros(vis.time_index.size, bool)}
+    kinds = {"gnss": gf.kind, "magnetometer": mf.kind,
+             "panel_currents": np.where(faults["panel_currents"], "current", "").astype(object),
+             "gnss_visibility": np.full(vis.time_index.size, "", dtype=object)}
+    config = {
+        "magnetometer": {"q_BM": q_BM_arr.tolist()},
+        "solar_panels": [{"normal_B": list(nrm), "max_current_a": max_current_a} for nrm in PANEL_NORMALS_B],
+        "gnss_antenna_axis_B": a_B.tolist(),
+    }
+    truth = Truth002(
+        time_tai_ns=time_ns, r_I=orbit.r_I, v_I=orbit.v_I, r_E=orbit.r_E, v_E=orbit.v_E, q_OB=att.q_OB,
+        pitch_rad=att.pitch, yaw_rad=att.yaw, roll_rad=att.roll, field_E_nT=env.field_E, field_O_nT=env.field_O,
+        sun_O=env.sun_O, sunlit_fraction=env.sunlit, antenna_O=antenna_O, visibility_time_tai_ns=time_ns[vis.rows],
+        faults=faults, fault_kind=kinds,
+        clean={"gnss": {"r_E": gnss_r, "v_E": gnss_v}, "magnetometer": {"b_M": b_M},
+               "panel_currents": {"current_a": cur.reshape(-1)}},
+        magnetometer_noise_nT=magnetometer_noise_nT, current_noise_a=current_noise_a,
+        gnss_position_noise_m=gnss_position_noise_m, gnss_velocity_noise_m_s=gnss_velocity_noise_m_s,
+    )
+    return Scenario002(streams=streams, config=config, truth=truth, parameters=parameters)
 
-    # Orbit: sun-synchronous, node at local time ltan_h, J2_EARTH about the true pole.
+
+def _check_parameters(p: dict[str, Any]) -> None:
+    """The parameter domains of :func:`simulate_seed002` (Seed002ParameterError naming the parameter)."""
+    _check(p["duration_s"] > 10 * p["period_s"], f"duration_s must exceed 10 periods, got {p['duration_s']}")
+    _check(p["period_s"] > 0 and p["visibility_period_s"] > 0, "periods must be > 0")
+    _check(p["altitude_m"] > 100e3, f"altitude_m must be > 100 km, got {p['altitude_m']}")
+    for name in ("gnss_fault_fraction", "magnetometer_fault_fraction", "panel_fault_fraction",
+                 "visibility_miss_probability"):
+        _check(0.0 <= p[name] < 0.04, f"{name} must be in [0, 0.04), got {p[name]}")
+    _check(min(p["magnetometer_noise_nT"], p["current_noise_a"], p["gnss_position_noise_m"],
+               p["gnss_velocity_noise_m_s"]) >= 0, "noise levels must be >= 0")
+    _check(0 < p["cone_half_angle_rad"] < np.pi, "cone_half_angle_rad must be in (0, pi)")
+
+
+@dataclass(frozen=True)
+class _Orbit:
+    """The true orbit on the grid: GCRS r_I, v_I and ITRS r_E, v_E (n, 3), GCRS -> ITRS matrices (n, 3, 3)."""
+
+    r_I: NDArray[np.float64]
+    v_I: NDArray[np.float64]
+    r_E: NDArray[np.float64]
+    v_E: NDArray[np.float64]
+    dcm_EI: NDArray[np.float64]
+
+
+def _orbit(start: int, t_s: NDArray[np.float64], time_ns: NDArray[np.int64], altitude_m: float, ltan_h: float,
+           u0_rad: float) -> _Orbit:
+    """Sun-synchronous, node at local time ltan_h, J2_EARTH about the true pole; ITRS with zero EOP."""
     a = R_EARTH_M + altitude_m
     inc = float(sun_synchronous_inclination_rad(a))
     sun0 = sun_position_I_m(np.array([start]))[0]
@@ -224,131 +280,192 @@ def simulate_seed002(
     along = np.cross(normal, node)
     r0 = a * (np.cos(u0_rad) * node + np.sin(u0_rad) * along)
     v0 = np.sqrt(MU_EARTH_M3_S2 / a) * (-np.sin(u0_rad) * node + np.cos(u0_rad) * along)
-    pole_I = gcrs_to_itrs_mat(np.array([start]))[0][2]  # ITRS z axis in GCRS coordinates
+    pole_I = np.asarray(gcrs_to_itrs_mat(np.array([start]))[0][2], dtype=np.float64)  # ITRS z axis in the GCRS
     r_I, v_I = _propagate_j2(r0, v0, t_s, pole_I)
     dcm_EI = gcrs_to_itrs_mat_interp(time_ns)  # zero EOP: the rotation axis is the ITRS z axis
     r_E = np.einsum("nij,nj->ni", dcm_EI, r_I)
     v_E = np.einsum("nij,nj->ni", dcm_EI, v_I) - np.cross([0.0, 0.0, OMEGA_EARTH_RAD_S], r_E)
+    return _Orbit(r_I, v_I, r_E, v_E, dcm_EI)
 
-    # Attitude (002 angles, matrix (3) = dcm_BO).
-    ph = rng_att.uniform(0.0, 2.0 * np.pi, size=3)
+
+@dataclass(frozen=True)
+class _Attitude:
+    """The 002 angles (n,) rad, dcm_BO (n, 3, 3) (matrix (3)) and q_OB (n, 4)."""
+
+    pitch: NDArray[np.float64]
+    yaw: NDArray[np.float64]
+    roll: NDArray[np.float64]
+    dcm_BO: NDArray[np.float64]
+    q_OB: NDArray[np.float64]
+
+
+def _attitude(t_s: NDArray[np.float64], pitch_mean_rad: float, pitch_amplitude_rad: float, yaw_amplitude_rad: float,
+              roll_rate_rad_s: float, rng: Generator) -> _Attitude:
+    """Pitch and yaw oscillations with random phases, roll spinning at roll_rate_rad_s (002 angles)."""
+    ph = rng.uniform(0.0, 2.0 * np.pi, size=3)
     pitch = pitch_mean_rad + pitch_amplitude_rad * np.sin(2 * np.pi * t_s / 1300.0 + ph[0])
     yaw = yaw_amplitude_rad * np.sin(2 * np.pi * t_s / 2100.0 + ph[1])
     roll = rotations._wrap_pi(ph[2] + roll_rate_rad_s * t_s)
     dcm_BO = rotations.dcm_from_angles_002(pitch, yaw, roll)
     q_OB = rotations.quat_canonical(rotations.quat_conjugate(rotations.quat_from_angles_002(pitch, yaw, roll)))
-    dcm_IO = dcm_IO_003(r_I, v_I)
+    return _Attitude(pitch, yaw, roll, dcm_BO, q_OB)
 
-    # Environment along the true orbit.
-    field_E = igrf_field_E_nT(r_E, time_ns)
-    field_I = np.einsum("nji,nj->ni", dcm_EI, field_E)
+
+@dataclass(frozen=True)
+class _Environment:
+    """Along the true orbit: IGRF-14 field in E and O (n, 3) nT, the Sun direction in O and the sunlit
+    fraction of the solar disc (n,)."""
+
+    field_E: NDArray[np.float64]
+    field_O: NDArray[np.float64]
+    sun_O: NDArray[np.float64]
+    sunlit: NDArray[np.float64]
+
+
+def _environment(orbit: _Orbit, time_ns: NDArray[np.int64]) -> _Environment:
+    dcm_IO = dcm_IO_003(orbit.r_I, orbit.v_I)
+    field_E = igrf_field_E_nT(orbit.r_E, time_ns)
+    field_I = np.einsum("nji,nj->ni", orbit.dcm_EI, field_E)
     field_O = np.einsum("nji,nj->ni", dcm_IO, field_I)
     r_sun = sun_position_I_m(time_ns)
-    nu = sunlit_fraction(r_I, r_sun)
-    sun_I = _unit(r_sun - r_I)
-    sun_O = np.einsum("nji,nj->ni", dcm_IO, sun_I)
-    q_BM_arr = rotations.quat_normalize(np.asarray(q_BM, dtype=float))
-    dcm_MB = rotations.quat_to_dcm(q_BM_arr).T
+    nu = sunlit_fraction(orbit.r_I, r_sun)
+    sun_O = np.einsum("nji,nj->ni", dcm_IO, _unit(r_sun - orbit.r_I))
+    return _Environment(field_E, field_O, sun_O, nu)
 
-    # Magnetometer.
-    b_B = np.einsum("nij,nj->ni", dcm_BO, field_O)
-    b_M = b_B @ dcm_MB.T + rng_mag.standard_normal((n, 3)) * magnetometer_noise_nT
 
-    # Panel currents.
+def _magnetometer(att: _Attitude, env: _Environment, q_BM: NDArray[np.float64], noise_nT: float,
+                  rng: Generator) -> NDArray[np.float64]:
+    """The field in the magnetometer frame (n, 3) nT plus white noise."""
+    dcm_MB = rotations.quat_to_dcm(q_BM).T
+    b_B = np.einsum("nij,nj->ni", att.dcm_BO, env.field_O)
+    return b_B @ dcm_MB.T + rng.standard_normal((b_B.shape[0], 3)) * noise_nT
+
+
+def _panel_currents(att: _Attitude, env: _Environment, max_current_a: float, noise_a: float,
+                    rng: Generator) -> NDArray[np.float64]:
+    """I = I_max nu max(0, n . s_B) + white noise (n, 6) A."""
     normals = np.array(PANEL_NORMALS_B)
-    s_B = np.einsum("nij,nj->ni", dcm_BO, sun_O)
-    cur = max_current_a * nu[:, None] * np.maximum(0.0, s_B @ normals.T)
-    cur = cur + rng_cur.standard_normal(cur.shape) * current_noise_a
-    n_p = normals.shape[0]
+    s_B = np.einsum("nij,nj->ni", att.dcm_BO, env.sun_O)
+    cur = max_current_a * env.sunlit[:, None] * np.maximum(0.0, s_B @ normals.T)
+    return cur + rng.standard_normal(cur.shape) * noise_a
 
-    # GNSS.
-    gnss_r = r_E + rng_gnss.standard_normal((n, 3)) * gnss_position_noise_m
-    gnss_v = v_E + rng_gnss.standard_normal((n, 3)) * gnss_velocity_noise_m_s
 
-    # Visibility of the GPS satellites of the navigation data.
-    vstep = max(1, int(round(visibility_period_s / period_s)))
-    vi = np.arange(0, n, vstep)
+@dataclass(frozen=True)
+class _Visibility:
+    """GNSS visibility: the grid rows of the visibility epochs, the satellites considered, and the
+    (epoch, satellite) indices of the tracked ones."""
+
+    rows: NDArray[np.int64]
+    sats: list[str]
+    time_index: NDArray[np.intp]
+    sat_index: NDArray[np.intp]
+
+
+def _visibility(nav: Mapping[str, Any], orbit: _Orbit, time_ns: NDArray[np.int64], antenna_O: NDArray[np.float64],
+                steps_per_epoch: float, cone_half_angle_rad: float, miss_probability: float,
+                rng: Generator) -> _Visibility:
+    """GPS satellites within the antenna cone, not hidden by the Earth, each missed with a probability."""
+    vi = np.arange(0, time_ns.size, max(1, int(round(steps_per_epoch))))
     sats = sorted({str(s) for s in np.asarray(nav["sat"]).astype(str) if s.startswith("G")})
     pos = satellite_positions_E(nav, time_ns[vi], sats)
-    g = line_of_sight_O(pos.r_E, r_E[vi], dcm_EO_002(r_E[vi], v_E[vi]))
-    a_B = _unit(np.asarray(antenna_axis_B, dtype=float))
-    antenna_O = np.einsum("nji,j->ni", dcm_BO, a_B)
+    g = line_of_sight_O(pos.r_E, orbit.r_E[vi], dcm_EO_002(orbit.r_E[vi], orbit.v_E[vi]))
     cosang = np.einsum("tsi,ti->ts", np.nan_to_num(g), antenna_O[vi])
-    occ = earth_occulted(g, np.linalg.norm(r_E[vi], axis=1), GRAZING_ALTITUDE_M)
+    occ = earth_occulted(g, np.linalg.norm(orbit.r_E[vi], axis=1), GRAZING_ALTITUDE_M)
     visible = pos.valid & ~occ & (cosang >= np.cos(cone_half_angle_rad))
-    visible &= rng_vis.random(visible.shape) >= visibility_miss_probability
+    visible &= rng.random(visible.shape) >= miss_probability
     ti, si = np.nonzero(visible)
+    return _Visibility(vi, sats, ti, si)
 
-    # Faults.
-    kinds: dict[str, NDArray[np.object_]] = {}
-    starts = _fault_rows(rng_fg, n, gnss_fault_fraction / 2.0)  # bursts of 2 samples on average
-    lengths = rng_fg.integers(1, 4, size=starts.size)
+
+@dataclass(frozen=True)
+class _GnssFaults:
+    """GNSS with the faults: r, v (n, 3), the faulty rows (n,) and their kind ("" where clean)."""
+
+    r: NDArray[np.float64]
+    v: NDArray[np.float64]
+    fault: NDArray[np.bool_]
+    kind: NDArray[np.object_]
+
+
+def _gnss_faults(gnss_r: NDArray[np.float64], gnss_v: NDArray[np.float64], fraction: float,
+                 rng: Generator) -> _GnssFaults:
+    """Bursts of 1-3 samples with position errors of 0.5-5 km and/or velocity errors of 5-50 m/s."""
+    n = gnss_r.shape[0]
+    starts = _fault_rows(rng, n, fraction / 2.0)  # bursts of 2 samples on average
+    lengths = rng.integers(1, 4, size=starts.size)
     burst = np.unique(np.concatenate([np.zeros(0, np.int64)] + [s + np.arange(k) for s, k in
                                                                 zip(starts, lengths, strict=True)]))
     burst = burst[burst < n]
-    gkind = rng_fg.integers(0, 3, size=burst.size)  # 0 position, 1 velocity, 2 both
-    dpos = _random_unit(rng_fg, burst.size) * rng_fg.uniform(500.0, 5000.0, size=(burst.size, 1))
-    dvel = _random_unit(rng_fg, burst.size) * rng_fg.uniform(5.0, 50.0, size=(burst.size, 1))
-    clean_gnss = {"r": gnss_r.copy(), "v": gnss_v.copy()}
-    gnss_r[burst] += np.where((gkind != 1)[:, None], dpos, 0.0)
-    gnss_v[burst] += np.where((gkind != 0)[:, None], dvel, 0.0)
-    gnss_fault = np.zeros(n, bool)
-    gnss_fault[burst] = True
-    kinds["gnss"] = np.full(n, "", dtype=object)
-    kinds["gnss"][burst] = np.array(["position", "velocity", "position+velocity"], dtype=object)[gkind]
+    gkind = rng.integers(0, 3, size=burst.size)  # 0 position, 1 velocity, 2 both
+    dpos = _random_unit(rng, burst.size) * rng.uniform(500.0, 5000.0, size=(burst.size, 1))
+    dvel = _random_unit(rng, burst.size) * rng.uniform(5.0, 50.0, size=(burst.size, 1))
+    r, v = gnss_r.copy(), gnss_v.copy()
+    r[burst] += np.where((gkind != 1)[:, None], dpos, 0.0)
+    v[burst] += np.where((gkind != 0)[:, None], dvel, 0.0)
+    fault = np.zeros(n, bool)
+    fault[burst] = True
+    kind = np.full(n, "", dtype=object)
+    kind[burst] = np.array(["position", "velocity", "position+velocity"], dtype=object)[gkind]
+    return _GnssFaults(r, v, fault, kind)
 
-    m_rows = _fault_rows(rng_fm, n, magnetometer_fault_fraction)
-    clean_mag = b_M.copy()
-    b_M[m_rows] += _random_unit(rng_fm, m_rows.size) * rng_fm.uniform(1500.0, 10000.0, size=(m_rows.size, 1))
-    mag_fault = np.zeros(n, bool)
-    mag_fault[m_rows] = True
-    kinds["magnetometer"] = np.where(mag_fault, "spike", "").astype(object)
 
-    # Panel faults: epochs spaced apart, one panel each.
-    p_epochs = _fault_rows(rng_fp, n, panel_fault_fraction * n_p)
-    p_panel = rng_fp.integers(0, n_p, size=p_epochs.size)
-    clean_cur = cur.copy()
+@dataclass(frozen=True)
+class _Faults:
+    """A stream's values with the faults injected, the faulty entries and (magnetometer) their kind."""
+
+    values: NDArray[np.float64]
+    fault: NDArray[np.bool_]
+    kind: NDArray[np.object_]
+
+
+def _magnetometer_faults(b_M: NDArray[np.float64], fraction: float, rng: Generator) -> _Faults:
+    """Spikes of 1500-10000 nT in random directions."""
+    n = b_M.shape[0]
+    m_rows = _fault_rows(rng, n, fraction)
+    values = b_M.copy()
+    values[m_rows] += _random_unit(rng, m_rows.size) * rng.uniform(1500.0, 10000.0, size=(m_rows.size, 1))
+    fault = np.zeros(n, bool)
+    fault[m_rows] = True
+    return _Faults(values, fault, np.where(fault, "spike", "").astype(object))
+
+
+def _panel_faults(cur: NDArray[np.float64], fraction: float, max_current_a: float, rng: Generator) -> _Faults:
+    """Epochs spaced apart, one panel each, the current replaced by a value in [0, 1.3 I_max] at least
+    0.3 I_max from the true one."""
+    n, n_p = cur.shape
+    p_epochs = _fault_rows(rng, n, fraction * n_p)
+    p_panel = rng.integers(0, n_p, size=p_epochs.size)
     true_cur = cur[p_epochs, p_panel]
     bad_val = true_cur.copy()
     todo = np.ones(p_epochs.size, bool)
     while np.any(todo):
-        bad_val[todo] = rng_fp.uniform(0.0, 1.3 * max_current_a, size=int(todo.sum()))
+        bad_val[todo] = rng.uniform(0.0, 1.3 * max_current_a, size=int(todo.sum()))
         todo = np.abs(bad_val - true_cur) < 0.3 * max_current_a
-    cur[p_epochs, p_panel] = bad_val
-    cur_fault = np.zeros(cur.shape, bool)
-    cur_fault[p_epochs, p_panel] = True
+    values = cur.copy()
+    values[p_epochs, p_panel] = bad_val
+    fault = np.zeros(cur.shape, bool)
+    fault[p_epochs, p_panel] = True
+    return _Faults(values, fault, np.zeros(0, dtype=object))
 
-    panel_time = np.repeat(time_ns, n_p)
-    streams: dict[str, dict[str, NDArray[Any]]] = {
+
+def _streams002(
+    time_ns: NDArray[np.int64], gnss_r: NDArray[np.float64], gnss_v: NDArray[np.float64], b_M: NDArray[np.float64],
+    cur: NDArray[np.float64], vis: _Visibility,
+) -> dict[str, dict[str, NDArray[Any]]]:
+    """The four streams in their canonical columns."""
+    n, n_p = cur.shape
+    ti, si = vis.time_index, vis.sat_index
+    return {
         "gnss": {"time_tai_ns": time_ns, **{c: gnss_r[:, i].copy() for i, c in enumerate("xyz")},
                  **{c: gnss_v[:, i].copy() for i, c in enumerate(("vx", "vy", "vz"))},
                  "sensor": np.full(n, "gnss", dtype=object)},
         "magnetometer": {"time_tai_ns": time_ns, **{c: b_M[:, i].copy() for i, c in enumerate(("bx", "by", "bz"))},
                          "sensor": np.full(n, "mag1", dtype=object)},
-        "panel_currents": {"time_tai_ns": panel_time, "panel": np.tile(np.arange(n_p, dtype=np.int64), n),
+        "panel_currents": {"time_tai_ns": np.repeat(time_ns, n_p), "panel": np.tile(np.arange(n_p, dtype=np.int64), n),
                            "current_a": cur.reshape(-1).copy(), "sensor": np.full(n * n_p, "panel_currents",
                                                                                    dtype=object)},
-        "gnss_visibility": {"time_tai_ns": time_ns[vi][ti], "system": np.full(ti.size, "G", dtype=object),
-                            "prn": np.array([int(sats[k][1:]) for k in si], dtype=np.int64),
+        "gnss_visibility": {"time_tai_ns": time_ns[vis.rows][ti], "system": np.full(ti.size, "G", dtype=object),
+                            "prn": np.array([int(vis.sats[k][1:]) for k in si], dtype=np.int64),
                             "visible": np.ones(ti.size, dtype=bool),
                             "sensor": np.full(ti.size, "gnss_visibility", dtype=object)},
     }
-    faults = {"gnss": gnss_fault, "magnetometer": mag_fault, "panel_currents": cur_fault.reshape(-1),
-              "gnss_visibility": np.zeros(ti.size, bool)}
-    kinds["panel_currents"] = np.where(faults["panel_currents"], "current", "").astype(object)
-    kinds["gnss_visibility"] = np.full(ti.size, "", dtype=object)
-    config = {
-        "magnetometer": {"q_BM": q_BM_arr.tolist()},
-        "solar_panels": [{"normal_B": list(nrm), "max_current_a": max_current_a} for nrm in PANEL_NORMALS_B],
-        "gnss_antenna_axis_B": a_B.tolist(),
-    }
-    truth = Truth002(
-        time_tai_ns=time_ns, r_I=r_I, v_I=v_I, r_E=r_E, v_E=v_E, q_OB=q_OB, pitch_rad=pitch, yaw_rad=yaw,
-        roll_rad=roll, field_E_nT=field_E, field_O_nT=field_O, sun_O=sun_O, sunlit_fraction=nu, antenna_O=antenna_O,
-        visibility_time_tai_ns=time_ns[vi], faults=faults, fault_kind=kinds,
-        clean={"gnss": {"r_E": clean_gnss["r"], "v_E": clean_gnss["v"]}, "magnetometer": {"b_M": clean_mag},
-               "panel_currents": {"current_a": clean_cur.reshape(-1)}},
-        magnetometer_noise_nT=magnetometer_noise_nT, current_noise_a=current_noise_a,
-        gnss_position_noise_m=gnss_position_noise_m, gnss_velocity_noise_m_s=gnss_velocity_noise_m_s,
-    )
-    return Scenario002(streams=streams, config=config, truth=truth, parameters=parameters)

@@ -37,12 +37,12 @@ from typing import Any
 
 import numpy as np
 from numpy.random import PCG64, Generator, SeedSequence
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from processing.attitude import rotations
 from processing.frames.earth_orientation import EarthOrientation, gcrs_to_itrs_state
 from processing.orbits.two_body import mean_motion_rad_s, sun_synchronous_inclination_rad
-from processing.simulate.orbital_attitude_model import OrbitalAttitudeModel, SinusoidSeries
+from processing.simulate.orbital_attitude_model import AttitudeState, OrbitalAttitudeModel, SinusoidSeries
 from processing.units import NS_PER_S, R_EARTH_M, RAD_PER_ARCSEC, RAD_PER_DEG
 
 ALPHA_003_RAD = 15.0 * RAD_PER_DEG
@@ -232,26 +232,10 @@ def simulate_seed003(
     Returns :class:`Scenario003`.
     """
     parameters = {k: v for k, v in locals().items() if k != "parameters"}
-    _check(duration_s > 0, f"duration_s must be > 0, got {duration_s}")
-    for name in ("st_period_s", "gyro_period_s", "gnss_period_s", "vibration_hz"):
-        _check(parameters[name] > 0, f"{name} must be > 0, got {parameters[name]}")
-    _check(0.0 <= gap_fraction < 0.5, f"gap_fraction must be in [0, 0.5), got {gap_fraction}")
-    _check(n_st_gaps >= 0, f"n_st_gaps must be >= 0, got {n_st_gaps}")
-    _check(
-        0.0 <= st_time_offset_s < st_period_s,
-        f"st_time_offset_s must be in [0, st_period_s={st_period_s}), got {st_time_offset_s}",
-    )
-    _check(altitude_m > 0, f"altitude_m must be > 0, got {altitude_m}")
-    for name in ("st_noise_std_rad", "vibration_amplitude_rad", "gyro_bias_rad_s", "gyro_bias_drift_rad_s2"):
-        _check(np.shape(parameters[name]) == (3,), f"{name} must have 3 components, got {parameters[name]!r}")
-    _check(min(st_noise_std_rad) >= 0 and gyro_noise_std_rad_s >= 0, "noise standard deviations must be >= 0")
-    _check(gnss_position_noise_std_m >= 0 and gnss_velocity_noise_std_m_s >= 0, "GNSS noise must be >= 0")
-    _check(np.shape(q_BG) == (4,), f"q_BG must have 4 components, got {q_BG!r}")
-
+    _check_parameters(parameters)
     rng_attitude, rng_st, rng_gaps, rng_gyro, rng_gnss = (
         Generator(PCG64(s)) for s in SeedSequence(seed).spawn(5)
     )
-    start = np.int64(start_tai_ns)
     a_m = R_EARTH_M + altitude_m
     model = OrbitalAttitudeModel(
         a_m=a_m,
@@ -262,94 +246,160 @@ def simulate_seed003(
         yaw=_series(yaw_mean_rad, yaw_amplitude_rad, vibration_amplitude_rad[1], vibration_hz, rng_attitude),
         roll=_series(roll_mean_rad, roll_amplitude_rad, vibration_amplitude_rad[2], vibration_hz, rng_attitude),
     )
-
-    def seconds(t_ns: NDArray) -> NDArray:
-        return (t_ns - start).astype(np.float64) / NS_PER_S
-
-    # Star tracker: q_IS = q_IB o q_BS o exp(noise about the sensor axes), gaps removed.
     q_BS = mounting_q_BS_003(alpha_rad)
-    st_nominal = time_grid_tai_ns(start, duration_s, st_period_s, st_time_offset_s)
-    keep = gap_mask(st_nominal.size, gap_fraction, n_st_gaps, rng_gaps)
-    st_time = st_nominal[keep]
-    st_state = model.evaluate(seconds(st_time))
-    q_IS_true = rotations.quat_canonical(rotations.quat_multiply(st_state.q_IB, q_BS))
-    noise_S = rng_st.standard_normal((st_time.size, 3)) * np.asarray(st_noise_std_rad)
-    q_IS = rotations.quat_canonical(rotations.quat_multiply(q_IS_true, rotations.rotvec_to_quat(noise_S)))
-    edges = np.flatnonzero(np.diff(keep.astype(np.int8)))  # index before each change keep <-> removed
-    gap_intervals = np.stack([st_nominal[edges[0::2]], st_nominal[edges[1::2] + 1]], axis=-1)
-
-    # Gyro: w_G = dcm_GB w_B + b(t) + noise.
-    q_BG_arr = rotations.quat_canonical(rotations.quat_normalize(np.asarray(q_BG, dtype=float)))
-    gyro_time = time_grid_tai_ns(start, duration_s, gyro_period_s)
-    t_gyro = seconds(gyro_time)
-    gyro_state = model.evaluate(t_gyro)
-    bias = np.asarray(gyro_bias_rad_s, dtype=float) + np.asarray(gyro_bias_drift_rad_s2, dtype=float) * t_gyro[:, None]
-    w_G_true = rotations.quat_rotate(rotations.quat_conjugate(q_BG_arr), gyro_state.w_B)
-    w_G = w_G_true + bias + rng_gyro.standard_normal((gyro_time.size, 3)) * gyro_noise_std_rad_s
-
-    # GNSS: ITRS state from the inertial truth, zero EOP, plus white noise.
-    eop = EarthOrientation()
-    gnss_time = time_grid_tai_ns(start, duration_s, gnss_period_s)
-    r_I, v_I = model.orbit(seconds(gnss_time))
-    r_E, v_E = gcrs_to_itrs_state(r_I, v_I, gnss_time, eop)
-    r_E_meas = r_E + rng_gnss.standard_normal(r_E.shape) * gnss_position_noise_std_m
-    v_E_meas = v_E + rng_gnss.standard_normal(v_E.shape) * gnss_velocity_noise_std_m_s
-
-    streams = {
-        "star_tracker": {
-            "time_tai_ns": st_time,
-            **{f"q{i}": q_IS[:, i].copy() for i in range(4)},
-            "sensor": np.full(st_time.size, ST_SENSOR, dtype=object),
-        },
-        "gyro": {
-            "time_tai_ns": gyro_time,
-            **{c: w_G[:, i].copy() for i, c in enumerate(("wx", "wy", "wz"))},
-            "sensor": np.full(gyro_time.size, "gyro", dtype=object),
-        },
-        "gnss": {
-            "time_tai_ns": gnss_time,
-            **{c: r_E_meas[:, i].copy() for i, c in enumerate(("x", "y", "z"))},
-            **{c: v_E_meas[:, i].copy() for i, c in enumerate(("vx", "vy", "vz"))},
-            "sensor": np.full(gnss_time.size, "gnss", dtype=object),
-        },
-    }
-    config = {
-        "star_trackers": {ST_SENSOR: {"q_BS": q_BS.tolist()}},
-        "gyro": {"q_BG": q_BG_arr.tolist()},
-    }
+    st = _star_tracker(model, start_tai_ns, duration_s, st_period_s, st_time_offset_s, q_BS, st_noise_std_rad,
+                       (gap_fraction, n_st_gaps), rng_gaps, rng_st)
+    gyro = _gyro(model, start_tai_ns, duration_s, gyro_period_s, q_BG, gyro_bias_rad_s, gyro_bias_drift_rad_s2,
+                 gyro_noise_std_rad_s, rng_gyro)
+    gnss = _gnss(model, start_tai_ns, duration_s, gnss_period_s, gnss_position_noise_std_m,
+                 gnss_velocity_noise_std_m_s, rng_gnss)
+    streams = {"star_tracker": st.columns(), "gyro": gyro.columns(), "gnss": gnss.columns()}
+    config = {"star_trackers": {ST_SENSOR: {"q_BS": q_BS.tolist()}}, "gyro": {"q_BG": gyro.q_BG.tolist()}}
     truth = Truth003(
-        model=model,
-        start_tai_ns=int(start),
-        q_BS=q_BS,
-        q_BG=q_BG_arr,
-        alpha_rad=alpha_rad,
-        mean_motion_rad_s=float(mean_motion_rad_s(a_m)),
-        gyro_time_tai_ns=gyro_time,
-        q_IB_gyro=gyro_state.q_IB,
-        w_B_gyro=gyro_state.w_B,
-        pitch_rad=gyro_state.pitch_rad,
-        yaw_rad=gyro_state.yaw_rad,
-        roll_rad=gyro_state.roll_rad,
-        gyro_bias_rad_s=bias,
+        model=model, start_tai_ns=int(np.int64(start_tai_ns)), q_BS=q_BS, q_BG=gyro.q_BG, alpha_rad=alpha_rad,
+        mean_motion_rad_s=float(mean_motion_rad_s(a_m)), gyro_time_tai_ns=gyro.time_tai_ns,
+        q_IB_gyro=gyro.state.q_IB, w_B_gyro=gyro.state.w_B, pitch_rad=gyro.state.pitch_rad,
+        yaw_rad=gyro.state.yaw_rad, roll_rad=gyro.state.roll_rad, gyro_bias_rad_s=gyro.bias_rad_s,
         gyro_bias0_rad_s=np.asarray(gyro_bias_rad_s, dtype=float),
         gyro_bias_drift_rad_s2=np.asarray(gyro_bias_drift_rad_s2, dtype=float),
-        gyro_noise_std_rad_s=gyro_noise_std_rad_s,
-        st_time_tai_ns=st_time,
-        q_IB_st=st_state.q_IB,
-        w_B_st=st_state.w_B,
-        q_IS_st=q_IS_true,
-        st_noise_rotvec_S=noise_S,
-        st_noise_std_rad=np.asarray(st_noise_std_rad, dtype=float),
-        st_nominal_time_tai_ns=st_nominal,
-        st_removed_time_tai_ns=st_nominal[~keep],
-        st_gap_intervals_tai_ns=gap_intervals,
-        gnss_time_tai_ns=gnss_time,
-        r_I=r_I,
-        v_I=v_I,
-        r_E=r_E,
-        v_E=v_E,
-        gnss_position_noise_std_m=gnss_position_noise_std_m,
-        gnss_velocity_noise_std_m_s=gnss_velocity_noise_std_m_s,
-        eop=eop,
+        gyro_noise_std_rad_s=gyro_noise_std_rad_s, st_time_tai_ns=st.time_tai_ns, q_IB_st=st.state.q_IB,
+        w_B_st=st.state.w_B, q_IS_st=st.q_IS_true, st_noise_rotvec_S=st.noise_S,
+        st_noise_std_rad=np.asarray(st_noise_std_rad, dtype=float), st_nominal_time_tai_ns=st.nominal_tai_ns,
+        st_removed_time_tai_ns=st.nominal_tai_ns[~st.keep], st_gap_intervals_tai_ns=st.gap_intervals_tai_ns,
+        gnss_time_tai_ns=gnss.time_tai_ns, r_I=gnss.r_I, v_I=gnss.v_I, r_E=gnss.r_E, v_E=gnss.v_E,
+        gnss_position_noise_std_m=gnss_position_noise_std_m, gnss_velocity_noise_std_m_s=gnss_velocity_noise_std_m_s,
+        eop=gnss.eop,
     )
     return Scenario003(streams=streams, config=config, truth=truth, parameters=parameters)
+
+
+def _check_parameters(p: dict[str, Any]) -> None:
+    """The parameter domains of :func:`simulate_seed003` (Seed003ParameterError naming the parameter)."""
+    _check(p["duration_s"] > 0, f"duration_s must be > 0, got {p['duration_s']}")
+    for name in ("st_period_s", "gyro_period_s", "gnss_period_s", "vibration_hz"):
+        _check(p[name] > 0, f"{name} must be > 0, got {p[name]}")
+    _check(0.0 <= p["gap_fraction"] < 0.5, f"gap_fraction must be in [0, 0.5), got {p['gap_fraction']}")
+    _check(p["n_st_gaps"] >= 0, f"n_st_gaps must be >= 0, got {p['n_st_gaps']}")
+    _check(
+        0.0 <= p["st_time_offset_s"] < p["st_period_s"],
+        f"st_time_offset_s must be in [0, st_period_s={p['st_period_s']}), got {p['st_time_offset_s']}",
+    )
+    _check(p["altitude_m"] > 0, f"altitude_m must be > 0, got {p['altitude_m']}")
+    for name in ("st_noise_std_rad", "vibration_amplitude_rad", "gyro_bias_rad_s", "gyro_bias_drift_rad_s2"):
+        _check(np.shape(p[name]) == (3,), f"{name} must have 3 components, got {p[name]!r}")
+    _check(min(p["st_noise_std_rad"]) >= 0 and p["gyro_noise_std_rad_s"] >= 0, "noise standard deviations must be >= 0")
+    _check(p["gnss_position_noise_std_m"] >= 0 and p["gnss_velocity_noise_std_m_s"] >= 0, "GNSS noise must be >= 0")
+    _check(np.shape(p["q_BG"]) == (4,), f"q_BG must have 4 components, got {p['q_BG']!r}")
+
+
+def _seconds(t_ns: NDArray, start_tai_ns: int) -> NDArray:
+    return (t_ns - np.int64(start_tai_ns)).astype(np.float64) / NS_PER_S
+
+
+@dataclass(frozen=True)
+class _StarTracker:
+    """Star-tracker samples: nominal times and the keep mask (gaps), kept times (M,), the model state
+    there, true and measured q_IS (M, 4), the applied noise rotation vectors, and the gap intervals."""
+
+    nominal_tai_ns: NDArray
+    keep: NDArray
+    time_tai_ns: NDArray
+    state: AttitudeState
+    q_IS_true: NDArray
+    q_IS: NDArray
+    noise_S: NDArray
+    gap_intervals_tai_ns: NDArray
+
+    def columns(self) -> dict[str, NDArray]:
+        return {
+            "time_tai_ns": self.time_tai_ns,
+            **{f"q{i}": self.q_IS[:, i].copy() for i in range(4)},
+            "sensor": np.full(self.time_tai_ns.size, ST_SENSOR, dtype=object),
+        }
+
+
+def _star_tracker(
+    model: OrbitalAttitudeModel, start_tai_ns: int, duration_s: float, period_s: float, offset_s: float,
+    q_BS: NDArray, noise_std_rad: tuple[float, float, float], gaps: tuple[float, int], rng_gaps: Generator,
+    rng_st: Generator,
+) -> _StarTracker:
+    """q_IS = q_IB o q_BS o exp(noise about the sensor axes), gaps (fraction, count) removed."""
+    nominal = time_grid_tai_ns(start_tai_ns, duration_s, period_s, offset_s)
+    keep = gap_mask(nominal.size, gaps[0], gaps[1], rng_gaps)
+    st_time = nominal[keep]
+    state = model.evaluate(_seconds(st_time, start_tai_ns))
+    q_IS_true = rotations.quat_canonical(rotations.quat_multiply(state.q_IB, q_BS))
+    noise_S = rng_st.standard_normal((st_time.size, 3)) * np.asarray(noise_std_rad)
+    q_IS = rotations.quat_canonical(rotations.quat_multiply(q_IS_true, rotations.rotvec_to_quat(noise_S)))
+    edges = np.flatnonzero(np.diff(keep.astype(np.int8)))  # index before each change keep <-> removed
+    gap_intervals = np.stack([nominal[edges[0::2]], nominal[edges[1::2] + 1]], axis=-1)
+    return _StarTracker(nominal, keep, st_time, state, q_IS_true, q_IS, noise_S, gap_intervals)
+
+
+@dataclass(frozen=True)
+class _Gyro:
+    """Gyro samples: times (N,), the model state there, bias (N, 3) and measured w_G (N, 3) in G, q_BG."""
+
+    time_tai_ns: NDArray
+    state: AttitudeState
+    bias_rad_s: NDArray
+    w_G: NDArray
+    q_BG: NDArray
+
+    def columns(self) -> dict[str, NDArray]:
+        return {
+            "time_tai_ns": self.time_tai_ns,
+            **{c: self.w_G[:, i].copy() for i, c in enumerate(("wx", "wy", "wz"))},
+            "sensor": np.full(self.time_tai_ns.size, "gyro", dtype=object),
+        }
+
+
+def _gyro(
+    model: OrbitalAttitudeModel, start_tai_ns: int, duration_s: float, period_s: float, q_BG: ArrayLike,
+    bias_rad_s: ArrayLike, bias_drift_rad_s2: ArrayLike, noise_std_rad_s: float, rng: Generator,
+) -> _Gyro:
+    """w_G = dcm_GB w_B + b(t) + noise."""
+    q_BG_arr = rotations.quat_canonical(rotations.quat_normalize(np.asarray(q_BG, dtype=float)))
+    gyro_time = time_grid_tai_ns(start_tai_ns, duration_s, period_s)
+    t_gyro = _seconds(gyro_time, start_tai_ns)
+    state = model.evaluate(t_gyro)
+    bias = np.asarray(bias_rad_s, dtype=float) + np.asarray(bias_drift_rad_s2, dtype=float) * t_gyro[:, None]
+    w_G_true = rotations.quat_rotate(rotations.quat_conjugate(q_BG_arr), state.w_B)
+    w_G = w_G_true + bias + rng.standard_normal((gyro_time.size, 3)) * noise_std_rad_s
+    return _Gyro(gyro_time, state, bias, w_G, q_BG_arr)
+
+
+@dataclass(frozen=True)
+class _Gnss:
+    """GNSS samples: times (K,), the inertial and (zero-EOP) ITRS truth (K, 3), the measured r, v."""
+
+    time_tai_ns: NDArray
+    r_I: NDArray
+    v_I: NDArray
+    r_E: NDArray
+    v_E: NDArray
+    r_E_meas: NDArray
+    v_E_meas: NDArray
+    eop: EarthOrientation
+
+    def columns(self) -> dict[str, NDArray]:
+        return {
+            "time_tai_ns": self.time_tai_ns,
+            **{c: self.r_E_meas[:, i].copy() for i, c in enumerate(("x", "y", "z"))},
+            **{c: self.v_E_meas[:, i].copy() for i, c in enumerate(("vx", "vy", "vz"))},
+            "sensor": np.full(self.time_tai_ns.size, "gnss", dtype=object),
+        }
+
+
+def _gnss(
+    model: OrbitalAttitudeModel, start_tai_ns: int, duration_s: float, period_s: float, position_noise_m: float,
+    velocity_noise_m_s: float, rng: Generator,
+) -> _Gnss:
+    """ITRS state from the inertial truth, zero EOP, plus white noise."""
+    eop = EarthOrientation()
+    gnss_time = time_grid_tai_ns(start_tai_ns, duration_s, period_s)
+    r_I, v_I = model.orbit(_seconds(gnss_time, start_tai_ns))
+    r_E, v_E = gcrs_to_itrs_state(r_I, v_I, gnss_time, eop)
+    r_E_meas = r_E + rng.standard_normal(r_E.shape) * position_noise_m
+    v_E_meas = v_E + rng.standard_normal(v_E.shape) * velocity_noise_m_s
+    return _Gnss(gnss_time, r_I, v_I, r_E, v_E, r_E_meas, v_E_meas, eop)

@@ -29,6 +29,10 @@ Model (defaults from 004):
   IGRF field at the true position as its model (with the measurement noise it is told).
 Angles: roll, pitch, yaw of processing.attitude.rigid_body (3-2-1 from O to B); 004 starts its transients at
 (-30, 10, -20) deg with w_OB = 0.
+
+Steps of :func:`simulate_seed004`: parameters; orbit and environment on the grid; sensor frames and the
+noise drawn up front; the LQR design; the closed loop (processing.simulate.seed004_loop); truth, GNSS
+noise and streams.
 """
 
 from __future__ import annotations
@@ -39,15 +43,13 @@ from typing import Any, Literal
 
 import numpy as np
 from numpy.random import PCG64, Generator, SeedSequence
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from processing.attitude import rotations
 from processing.attitude.rigid_body import (
     DISTURBANCE_004_N_M,
     INERTIA_004_KG_M2,
     RigidBody004,
-    dcm_BO_columns,
-    q_OB_from_roll_pitch_yaw_004,
     roll_pitch_yaw_004,
 )
 from processing.environment.eclipse import sunlit_fraction
@@ -56,7 +58,7 @@ from processing.environment.sun import sun_direction_I, sun_position_I_m
 from processing.frames.earth_orientation import EarthOrientation
 from processing.frames.earth_rotation_interp import gcrs_to_itrs_mat_interp
 from processing.frames.orbital import dcm_IO_lvlh_004
-from processing.gyroless.ekf import FILTERS, FilterTuning, initial_covariance, triad_q_OB
+from processing.gyroless.ekf import FilterTuning
 from processing.gyroless.magnetic_control import (
     ENERGY_ALPHA_004,
     ENERGY_BETA_004,
@@ -66,6 +68,7 @@ from processing.gyroless.magnetic_control import (
     design_averaged_lqr,
 )
 from processing.orbits.two_body import circular_orbit_state, mean_motion_rad_s
+from processing.simulate.seed004_loop import Environment004, History, LoopSetup, Sensors004, closed_loop
 from processing.units import NS_PER_S, OMEGA_EARTH_RAD_S, R_EARTH_M, RAD_PER_DEG
 
 __all__ = ["Scenario004", "Seed004ParameterError", "Truth004", "orbit_period_s", "simulate_seed004"]
@@ -134,16 +137,6 @@ class Scenario004:
     parameters: dict[str, Any]
 
 
-def _rotvec(q: tuple[float, ...]) -> tuple[float, float, float]:
-    """Rotation vector (rad) of a unit quaternion (4 floats), angle in [0, pi]."""
-    q0, q1, q2, q3 = q
-    if q0 < 0.0:
-        q0, q1, q2, q3 = -q0, -q1, -q2, -q3
-    s = math.sqrt(q1 * q1 + q2 * q2 + q3 * q3)
-    k = 2.0 * math.atan2(s, q0) / s if s > 1e-12 else 2.0 / q0
-    return (k * q1, k * q2, k * q3)
-
-
 def _check(cond: bool, message: str) -> None:
     if not cond:
         raise Seed004ParameterError(message)
@@ -200,14 +193,7 @@ def simulate_seed004(
     Returns :class:`Scenario004`.
     """
     parameters = {k: v for k, v in locals().items() if k != "parameters"}
-    _check(duration_s > 0 and step_s > 0, f"duration_s and step_s must be > 0, got {duration_s}, {step_s}")
-    _check(substeps >= 1, f"substeps must be >= 1, got {substeps}")
-    _check(controller in ("energy", "lqr", "none"), f"controller must be energy|lqr|none, got {controller!r}")
-    _check(estimator in ("ekf", "mekf", "truth"), f"estimator must be ekf|mekf|truth, got {estimator!r}")
-    _check(sun_model in ("ephemeris", "paper"), f"sun_model must be ephemeris|paper, got {sun_model!r}")
-    _check(magnetometer_noise_nT >= 0 and sun_sensor_noise_deg >= 0, "sensor noise must be >= 0")
-    _check(0.0 <= sun_outage_s < orbit_period_s(altitude_m), "sun_outage_s must be in [0, orbit period)")
-
+    _check_parameters(parameters)
     tuning = FilterTuning() if onboard_tuning is None else onboard_tuning
     rng_mag, rng_sun, rng_gnss, _ = (Generator(PCG64(s)) for s in SeedSequence(seed).spawn(4))
     body = RigidBody004.from_inertia(inertia_kg_m2)
@@ -216,8 +202,44 @@ def simulate_seed004(
     start = np.int64(start_tai_ns)
     t_s = np.arange(K) * step_s
     time_ns = start + np.round(t_s * NS_PER_S).astype(np.int64)
+    env = _environment004(start, t_s, time_ns, altitude_m, inclination_deg, raan_rad, u0_rad, sun_model,
+                          sun_outage_s, sun_outage_center_u_deg)
+    sensors = _sensors004(env, q_BM, q_BS, magnetometer_noise_nT, sun_sensor_noise_deg, field_model_error,
+                          rng_mag, rng_sun)
+    amp = np.asarray(disturbance_N_m, dtype=float)
+    _check(amp.shape == (3,), f"disturbance_N_m must have 3 components, got {disturbance_N_m!r}")
+    lqr = None
+    if controller == "lqr":
+        lqr = _design_lqr(env, J, start, step_s, altitude_m, u0_rad, lqr_q, lqr_r)
+    loop = LoopSetup(
+        body=body, J=J, t_s=t_s, step_s=step_s, substeps=substeps, w0=env.w0, env=env, sensors=sensors,
+        tau_all=amp[None, :] * np.sin(env.w0 * (t_s[:, None] + 0.5 * step_s / substeps)), amp=amp,
+        controller=controller, estimator=estimator, tuning=tuning, magnetometer_noise_nT=magnetometer_noise_nT,
+        sigma_s=max(sun_sensor_noise_deg * RAD_PER_DEG, 1e-4), energy_beta=energy_beta, energy_alpha=energy_alpha,
+        K_gain=lqr.K if lqr is not None else None, max_dipole_A_m2=max_dipole_A_m2,
+    )
+    hist = closed_loop(loop, initial_angles_deg, initial_omega_BO_rad_s)
+    return _scenario004(env, sensors, loop, hist, J, time_ns, lqr, u0_rad, parameters,
+                        (gnss_position_noise_m, gnss_velocity_noise_m_s), rng_gnss)
 
-    # orbit and environment on the step grid (vectorised)
+
+def _check_parameters(p: dict[str, Any]) -> None:
+    """The parameter domains of :func:`simulate_seed004` (Seed004ParameterError naming the parameter)."""
+    _check(p["duration_s"] > 0 and p["step_s"] > 0,
+           f"duration_s and step_s must be > 0, got {p['duration_s']}, {p['step_s']}")
+    _check(p["substeps"] >= 1, f"substeps must be >= 1, got {p['substeps']}")
+    _check(p["controller"] in ("energy", "lqr", "none"), f"controller must be energy|lqr|none, got {p['controller']!r}")
+    _check(p["estimator"] in ("ekf", "mekf", "truth"), f"estimator must be ekf|mekf|truth, got {p['estimator']!r}")
+    _check(p["sun_model"] in ("ephemeris", "paper"), f"sun_model must be ephemeris|paper, got {p['sun_model']!r}")
+    _check(p["magnetometer_noise_nT"] >= 0 and p["sun_sensor_noise_deg"] >= 0, "sensor noise must be >= 0")
+    _check(0.0 <= p["sun_outage_s"] < orbit_period_s(p["altitude_m"]), "sun_outage_s must be in [0, orbit period)")
+
+
+def _environment004(
+    start: np.int64, t_s: NDArray, time_ns: NDArray, altitude_m: float, inclination_deg: float,
+    raan_rad: float | None, u0_rad: float, sun_model: str, sun_outage_s: float, sun_outage_center_u_deg: float,
+) -> Environment004:
+    """Orbit (node dawn-dusk at the start unless raan_rad), IGRF-14 field, Sun, shadow and outages."""
     a_m = R_EARTH_M + altitude_m
     w0 = float(mean_motion_rad_s(a_m))
     inc = inclination_deg * RAD_PER_DEG
@@ -225,176 +247,91 @@ def simulate_seed004(
     raan = float(math.atan2(-s_I0[0], s_I0[1])) % (2 * math.pi) if raan_rad is None else float(raan_rad)
     r_I, v_I = circular_orbit_state(t_s, a_m, inc, raan, u0_rad)
     dcm_IO = dcm_IO_lvlh_004(r_I, v_I)
-    eop = EarthOrientation()
-    dcm_EI = gcrs_to_itrs_mat_interp(time_ns, eop)
+    dcm_EI = gcrs_to_itrs_mat_interp(time_ns, EarthOrientation())
     r_E = np.einsum("kij,kj->ki", dcm_EI, r_I)
     v_E = np.einsum("kij,kj->ki", dcm_EI, v_I) - np.cross([0.0, 0.0, OMEGA_EARTH_RAD_S], r_E)
     B_E = igrf_field_E_nT(r_E, time_ns)
     B_O = np.einsum("kji,klj,kl->ki", dcm_IO, dcm_EI, B_E)  # dcm_OI dcm_IE B_E
     if sun_model == "paper":
-        s_O = np.tile([0.0, 1.0, 0.0], (K, 1))
-        sunlit = np.ones(K)
+        s_O = np.tile([0.0, 1.0, 0.0], (t_s.size, 1))
+        sunlit = np.ones(t_s.size)
     else:
         s_O = np.einsum("kji,kj->ki", dcm_IO, sun_direction_I(time_ns))
         sunlit = sunlit_fraction(r_I, sun_position_I_m(time_ns))
     u = (u0_rad + w0 * t_s) % (2 * math.pi)
     du = (u - sun_outage_center_u_deg * RAD_PER_DEG + math.pi) % (2 * math.pi) - math.pi
     outage = np.abs(du) < 0.5 * w0 * sun_outage_s
-    sun_visible = (sunlit >= 1.0) & ~outage
+    return Environment004(r_I, v_I, r_E, v_E, dcm_IO, B_O, s_O, sunlit, (sunlit >= 1.0) & ~outage, w0, inc, raan,
+                           a_m)
 
-    # sensors' frames and noise (pre-drawn, so that noise does not depend on the controller)
+
+def _sensors004(
+    env: Environment004, q_BM: ArrayLike, q_BS: ArrayLike, magnetometer_noise_nT: float,
+    sun_sensor_noise_deg: float, field_model_error: float, rng_mag: Generator, rng_sun: Generator,
+) -> Sensors004:
+    K = env.B_O.shape[0]
     q_BM_a = rotations.quat_canonical(rotations.quat_normalize(np.asarray(q_BM, dtype=float)))
     q_BS_a = rotations.quat_canonical(rotations.quat_normalize(np.asarray(q_BS, dtype=float)))
-    dcm_MB = rotations.quat_to_dcm(rotations.quat_conjugate(q_BM_a))
-    dcm_SB = rotations.quat_to_dcm(rotations.quat_conjugate(q_BS_a))
     mag_noise = rng_mag.standard_normal((K, 3)) * magnetometer_noise_nT
     sun_rot_noise = rng_sun.standard_normal((K, 3)) * (sun_sensor_noise_deg * RAD_PER_DEG)
+    B_O = env.B_O
     B_O_meas = B_O + field_model_error * np.array([1.0, -1.0, 1.0]) * np.linalg.norm(B_O, axis=1, keepdims=True)
-    amp = np.asarray(disturbance_N_m, dtype=float)
-    _check(amp.shape == (3,), f"disturbance_N_m must have 3 components, got {disturbance_N_m!r}")
+    return Sensors004(
+        q_BM=q_BM_a, q_BS=q_BS_a, dcm_MB=rotations.quat_to_dcm(rotations.quat_conjugate(q_BM_a)),
+        dcm_SB=rotations.quat_to_dcm(rotations.quat_conjugate(q_BS_a)), mag_noise=mag_noise,
+        R_sun_noise=rotations.quat_to_dcm(rotations.rotvec_to_quat(sun_rot_noise)), B_O_meas=B_O_meas,
+    )
 
-    lqr = None
-    if controller == "lqr":
-        n_orbit = min(K, int(round(orbit_period_s(altitude_m) / step_s)))
-        if n_orbit < K:
-            B_design = B_O[:n_orbit]
-        else:
-            r1, v1 = circular_orbit_state(np.arange(n_orbit) * step_s, a_m, inc, raan, u0_rad)
-            t1 = start + np.round(np.arange(n_orbit) * step_s * NS_PER_S).astype(np.int64)
-            m1 = gcrs_to_itrs_mat_interp(t1, eop)
-            B_design = np.einsum("kji,klj,kl->ki", dcm_IO_lvlh_004(r1, v1), m1,
-                                 igrf_field_E_nT(np.einsum("kij,kj->ki", m1, r1), t1))
-        lqr = design_averaged_lqr(J, w0, B_design * 1e-9, step_s=step_s, Q=lqr_q, R=lqr_r)
 
-    # initial state
-    q = tuple(float(x) for x in q_OB_from_roll_pitch_yaw_004(*(np.asarray(initial_angles_deg) * RAD_PER_DEG)))
-    c2 = dcm_BO_columns(q)[1]  # type: ignore[arg-type]
-    w = tuple(float(initial_omega_BO_rad_s[i]) - w0 * c2[i] for i in range(3))
+def _design_lqr(env: Environment004, J: NDArray, start: np.int64, step_s: float, altitude_m: float, u0_rad: float,
+                lqr_q: float, lqr_r: tuple[float, float, float]) -> AveragedLQR:
+    """The averaged LQR (004 eq. 7) designed on the true field over the first orbit."""
+    K = env.B_O.shape[0]
+    n_orbit = min(K, int(round(orbit_period_s(altitude_m) / step_s)))
+    if n_orbit < K:
+        B_design = env.B_O[:n_orbit]
+    else:
+        r1, v1 = circular_orbit_state(np.arange(n_orbit) * step_s, env.a_m, env.inc, env.raan, u0_rad)
+        t1 = start + np.round(np.arange(n_orbit) * step_s * NS_PER_S).astype(np.int64)
+        m1 = gcrs_to_itrs_mat_interp(t1, EarthOrientation())
+        B_design = np.einsum("kji,klj,kl->ki", dcm_IO_lvlh_004(r1, v1), m1,
+                             igrf_field_E_nT(np.einsum("kij,kj->ki", m1, r1), t1))
+    return design_averaged_lqr(J, env.w0, B_design * 1e-9, step_s=step_s, Q=lqr_q, R=lqr_r)
 
-    q_hist, w_hist = np.empty((K, 4)), np.empty((K, 3))
-    mu_hist, tau_hist = np.zeros((K, 3)), np.zeros((K, 3))
-    q_est_hist, w_est_hist = np.empty((K, 4)), np.empty((K, 3))
-    b_M_all, s_S_all = np.empty((K, 3)), np.full((K, 3), np.nan)
-    sigma_s = max(sun_sensor_noise_deg * RAD_PER_DEG, 1e-4)
-    # per-step sensor noise, drawn up front (the noise does not depend on the controller)
-    R_sun_noise = rotations.quat_to_dcm(rotations.rotvec_to_quat(sun_rot_noise))
-    B_O_T, B_O_meas_l = (B_O * 1e-9).tolist(), B_O_meas.tolist()
-    b_O_unit = _unit(B_O)
-    mag_noise_l, s_O_l = mag_noise.tolist(), s_O.tolist()
-    sun_vis_l = sun_visible.tolist()
-    ident_M = bool(np.allclose(q_BM_a, [1.0, 0.0, 0.0, 0.0]))
-    tau_all = amp[None, :] * np.sin(w0 * (t_s[:, None] + 0.5 * step_s / substeps))
-    tau_l = tau_all.tolist()
-    est = None
-    n2 = w0 * w0
-    h = step_s / substeps
-    K_gain = lqr.K if lqr is not None else None
-    prev_torque_B = np.zeros(3)
 
-    for k in range(K):
-        q_hist[k], w_hist[k] = q, w
-        c1, c2, c3 = dcm_BO_columns(q)  # type: ignore[arg-type]
-        # measurements at t_k: magnetometer (nT, frame M) and Sun (frame S)
-        bx, by, bz = B_O_meas_l[k]
-        b_B_true = np.array([bx * c1[0] + by * c2[0] + bz * c3[0], bx * c1[1] + by * c2[1] + bz * c3[1],
-                             bx * c1[2] + by * c2[2] + bz * c3[2]])
-        b_M = (b_B_true if ident_M else dcm_MB @ b_B_true) + mag_noise_l[k]
-        b_M_all[k] = b_M
-        B_B_meas_T = (b_M if ident_M else dcm_MB.T @ b_M) * 1e-9
-        B_norm = math.sqrt(float(B_B_meas_T @ B_B_meas_T))
-        s_B = None
-        if sun_vis_l[k]:
-            sx, sy, sz = s_O_l[k]
-            s_true = np.array([sx * c1[0] + sy * c2[0] + sz * c3[0], sx * c1[1] + sy * c2[1] + sz * c3[1],
-                               sx * c1[2] + sy * c2[2] + sz * c3[2]])
-            s_S = dcm_SB @ (R_sun_noise[k] @ s_true)
-            s_S_all[k] = s_S
-            s_B = dcm_SB.T @ s_S
-        # on-board estimate
-        if estimator == "truth":
-            q_est = q
-            w_bo = (w[0] + w0 * c2[0], w[1] + w0 * c2[1], w[2] + w0 * c2[2])
-        else:
-            b_B_unit = B_B_meas_T / B_norm
-            sigma_b = max(magnetometer_noise_nT, 1.0) * 1e-9 / B_norm
-            if est is None:
-                q_init = (triad_q_OB(b_O_unit[k], s_O[k], b_B_unit, s_B) if s_B is not None
-                          else np.array([1.0, 0.0, 0.0, 0.0]))
-                c2i = np.array(dcm_BO_columns(tuple(q_init))[1])  # type: ignore[arg-type]
-                P0 = initial_covariance(estimator, q_init, (10 if s_B is not None else 60) * RAD_PER_DEG, 2e-3, 1e-5)
-                est = FILTERS[estimator](J, q_init, -w0 * c2i, P0, tuning)
-            else:
-                est.predict(step_s, w0, n2, prev_torque_B)
-            est.update(b_B_unit, b_O_unit[k], sigma_b, s_B, s_O[k] if s_B is not None else None, sigma_s)
-            q_est = est.q
-            w_bo = est.omega_BO_B(w0)
-        q_est_hist[k], w_est_hist[k] = q_est, w_bo
-        # controller (dipole held over the step), B in tesla
-        Bx, By, Bz = float(B_B_meas_T[0]), float(B_B_meas_T[1]), float(B_B_meas_T[2])
-        if controller == "energy":
-            sgn = 1.0 if q_est[0] >= 0.0 else -1.0
-            vx = energy_beta * w_bo[0] + energy_alpha * sgn * q_est[1]
-            vy = energy_beta * w_bo[1] + energy_alpha * sgn * q_est[2]
-            vz = energy_beta * w_bo[2] + energy_alpha * sgn * q_est[3]
-            mu = (vy * Bz - vz * By, vz * Bx - vx * Bz, vx * By - vy * Bx)
-        elif controller == "lqr":
-            assert K_gain is not None
-            th = _rotvec(q_est)
-            u_t = -K_gain @ np.array([th[0], w_bo[0], th[1], w_bo[1], th[2], w_bo[2]])
-            ux, uy, uz = float(u_t[0]) / B_norm, float(u_t[1]) / B_norm, float(u_t[2]) / B_norm
-            mu = (uy * Bz - uz * By, uz * Bx - ux * Bz, ux * By - uy * Bx)
-        else:
-            mu = (0.0, 0.0, 0.0)
-        if max_dipole_A_m2 is not None:
-            peak = max(abs(mu[0]), abs(mu[1]), abs(mu[2]))
-            if peak > max_dipole_A_m2:
-                mu = tuple(m * (max_dipole_A_m2 / peak) for m in mu)  # type: ignore[assignment]
-        mu_hist[k] = mu
-        prev_torque_B = np.array([mu[1] * Bz - mu[2] * By, mu[2] * Bx - mu[0] * Bz, mu[0] * By - mu[1] * Bx])
-        # truth propagation over [t_k, t_k+1)
-        if k == K - 1:
-            break
-        B0, B1 = B_O_T[k], B_O_T[k + 1]
-        for j in range(substeps):
-            tau = tau_l[k] if j == 0 else (amp * math.sin(w0 * (t_s[k] + (j + 0.5) * h))).tolist()
-            fa, fb = j / substeps, (j + 1) / substeps
-            Ba = ((1 - fa) * B0[0] + fa * B1[0], (1 - fa) * B0[1] + fa * B1[1], (1 - fa) * B0[2] + fa * B1[2])
-            Bb = ((1 - fb) * B0[0] + fb * B1[0], (1 - fb) * B0[1] + fb * B1[1], (1 - fb) * B0[2] + fb * B1[2])
-            q, w = body.rk4_step(q, w, h, w0, n2, tau_B=tuple(tau), mu_B=mu, B_O0=Ba, B_O1=Bb)  # type: ignore
-    tau_hist[:] = tau_all
-    # truth series
-    q_OB = rotations.quat_canonical(q_hist)
-    q_IO = rotations.dcm_to_quat(dcm_IO)
-    q_IB = rotations.quat_canonical(rotations.quat_multiply(q_IO, q_OB))
+def _scenario004(
+    env: Environment004, sensors: Sensors004, loop: LoopSetup, hist: History, J: NDArray, time_ns: NDArray,
+    lqr: AveragedLQR | None, u0_rad: float, parameters: dict[str, Any], gnss_noise: tuple[float, float],
+    rng_gnss: Generator,
+) -> Scenario004:
+    """Truth series, GNSS noise (drawn last), streams and configuration."""
+    K, w0 = time_ns.size, env.w0
+    q_OB = rotations.quat_canonical(hist.q)
+    q_IB = rotations.quat_canonical(rotations.quat_multiply(rotations.dcm_to_quat(env.dcm_IO), q_OB))
     c2_all = rotations.quat_rotate(rotations.quat_conjugate(q_OB), np.array([0.0, 1.0, 0.0]))
-    w_BO = w_hist + w0 * c2_all
     roll, pitch, yaw = roll_pitch_yaw_004(q_OB)
-
-    gnss_r = r_E + rng_gnss.standard_normal(r_E.shape) * gnss_position_noise_m
-    gnss_v = v_E + rng_gnss.standard_normal(v_E.shape) * gnss_velocity_noise_m_s
-    vis = np.flatnonzero(sun_visible)
+    gnss_r = env.r_E + rng_gnss.standard_normal(env.r_E.shape) * gnss_noise[0]
+    gnss_v = env.v_E + rng_gnss.standard_normal(env.v_E.shape) * gnss_noise[1]
+    vis = np.flatnonzero(env.sun_visible)
     streams = {
-        "magnetometer": {"time_tai_ns": time_ns, **{c: b_M_all[:, i].copy() for i, c in enumerate(("bx", "by", "bz"))},
+        "magnetometer": {"time_tai_ns": time_ns, **{c: hist.b_M[:, i].copy() for i, c in enumerate(("bx", "by", "bz"))},
                          "sensor": np.full(K, "magnetometer", dtype=object)},
         "sun_sensor": {"time_tai_ns": time_ns[vis],
-                       **{c: s_S_all[vis, i].copy() for i, c in enumerate(("sx", "sy", "sz"))},
+                       **{c: hist.s_S[vis, i].copy() for i, c in enumerate(("sx", "sy", "sz"))},
                        "sensor": np.full(vis.size, "sun_sensor", dtype=object)},
         "gnss": {"time_tai_ns": time_ns, **{c: gnss_r[:, i].copy() for i, c in enumerate(("x", "y", "z"))},
                  **{c: gnss_v[:, i].copy() for i, c in enumerate(("vx", "vy", "vz"))},
                  "sensor": np.full(K, "gnss", dtype=object)},
-        "magnetorquer": {"time_tai_ns": time_ns, **{c: mu_hist[:, i].copy() for i, c in enumerate(("mx", "my", "mz"))},
+        "magnetorquer": {"time_tai_ns": time_ns, **{c: hist.mu[:, i].copy() for i, c in enumerate(("mx", "my", "mz"))},
                          "sensor": np.full(K, "magnetorquer", dtype=object)},
     }
-    config = {
-        "magnetometer": {"q_BM": q_BM_a.tolist()},
-        "sun_sensor": {"q_BS": q_BS_a.tolist()},
-        "inertia_kg_m2": J.tolist(),
-    }
+    config = {"magnetometer": {"q_BM": sensors.q_BM.tolist()}, "sun_sensor": {"q_BS": sensors.q_BS.tolist()},
+              "inertia_kg_m2": J.tolist()}
     truth = Truth004(
-        time_tai_ns=time_ns, q_OB=q_OB, q_IB=q_IB, omega_BI_B=w_hist, omega_BO_B=w_BO, roll_rad=roll,
-        pitch_rad=pitch, yaw_rad=yaw, B_O_nT=B_O, s_O=s_O, sun_visible=sun_visible, sunlit=sunlit,
-        mu_B_A_m2=mu_hist, tau_d_B_N_m=tau_hist, q_OB_onboard=rotations.quat_canonical(q_est_hist),
-        omega_BO_onboard_B=w_est_hist, r_I=r_I, v_I=v_I, r_E=r_E, v_E=v_E, w0_rad_s=w0, inclination_rad=inc,
-        raan_rad=raan, u0_rad=u0_rad, lqr=lqr,
+        time_tai_ns=time_ns, q_OB=q_OB, q_IB=q_IB, omega_BI_B=hist.w, omega_BO_B=hist.w + w0 * c2_all, roll_rad=roll,
+        pitch_rad=pitch, yaw_rad=yaw, B_O_nT=env.B_O, s_O=env.s_O, sun_visible=env.sun_visible, sunlit=env.sunlit,
+        mu_B_A_m2=hist.mu, tau_d_B_N_m=loop.tau_all, q_OB_onboard=rotations.quat_canonical(hist.q_est),
+        omega_BO_onboard_B=hist.w_est, r_I=env.r_I, v_I=env.v_I, r_E=env.r_E, v_E=env.v_E, w0_rad_s=w0,
+        inclination_rad=env.inc, raan_rad=env.raan, u0_rad=u0_rad, lqr=lqr,
     )
     return Scenario004(streams=streams, config=config, truth=truth, parameters=parameters)

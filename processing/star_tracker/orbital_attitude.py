@@ -54,13 +54,13 @@ from processing.orbits.gnss_orbit import (
     time_since_ascending_node_s,
 )
 from processing.signal.sine_series import fit_sine_series, select_harmonics, sine_series_design
-from processing.star_tracker.accuracy import (
+from processing.star_tracker.smoothing import (
     mean_quaternion,
     residual_mrps,
     sensor_axis_residuals,
     split_segments,
 )
-from processing.units import NS_PER_S
+from processing.units import ARCSEC_PER_RAD, NS_PER_S
 
 ORBITAL_FRAMES = ("orbital_003", "lvlh_004")
 MIN_SMOOTHING_SAMPLES = 12
@@ -188,9 +188,9 @@ def fit_trend_sines(t_s: NDArray, y: NDArray, *, trend_degree: int = 3, harmonic
         resid0 = float(np.sum((y - q @ proj) ** 2))
         tail = np.concatenate([np.cumsum((proj ** 2)[::-1])[::-1], [0.0]])
         ms = np.arange(cap + 1)
-        p = base + ms
-        rss = resid0 + tail[p]
-        score = np.where(n > p, n * rss / np.maximum(n - p, 1) ** 2, np.inf)
+        n_par = base + ms
+        rss = resid0 + tail[n_par]
+        score = np.where(n > n_par, n * rss / np.maximum(n - n_par, 1) ** 2, np.inf)
         m = int(ms[int(np.argmin(score))])
     else:
         m = top
@@ -264,6 +264,44 @@ def orbital_attitude(
     Star-tracker samples outside the GNSS arcs are dropped (listed in ``dropped_tai_ns``).
     """
     report = progress or (lambda f, s: None)
+    t, q, frame, q_BS_arr = _checked_inputs(time_tai_ns, q_XS, q_BS, inertial_frame, orbital_frame, smoothing_frame)
+    report(0.1, "GNSS orbit fit")
+    fit = fit_gnss(gnss_time_tai_ns, r_E, v_E, method=gnss_method)
+    covered = fit.covered(t)
+    if not np.any(covered):
+        raise OrbitalAttitudeError("no star-tracker sample lies within the GNSS arcs (the two streams do not "
+                                   "overlap in time)")
+    report(0.3, "frames")
+    fr = _frames(t, q, covered, fit, frame, orbital_frame, eop)  # 1-3
+    q_SB = rotations.quat_conjugate(q_BS_arr)
+    q_OB_raw = rotations.quat_canonical(rotations.quat_multiply(fr.q_OS, q_SB))
+    segments: tuple[SmoothingSegment, ...] = ()
+    q_OB = q_OB_raw
+    if smoothing:  # 4
+        report(0.5, "smoothing (003 §1.3)")
+        q_OS, segments = _smoothed_q_OS(fr, smoothing_frame, harmonics=harmonics, trend_degree=trend_degree,
+                                        segment_max_s=segment_max_s, max_gap_s=max_gap_s)
+        q_OB = rotations.quat_canonical(rotations.quat_multiply(q_OS, q_SB))
+    report(0.8, "angles and ascending nodes")  # 5
+    pitch, yaw, roll = rotations.pitch_yaw_roll_from_quat(q_OB)
+    pitch_raw, yaw_raw, roll_raw = rotations.pitch_yaw_roll_from_quat(q_OB_raw)
+    nodes = ascending_nodes(fit, eop)
+    since = time_since_ascending_node_s(fr.time_tai_ns, fr.r_I, fr.v_I, nodes)
+    q_GB = rotations.quat_canonical(rotations.quat_multiply(fr.q_GO, q_OB))
+    return OrbitalAttitude(
+        time_tai_ns=fr.time_tai_ns, q_GB=q_GB, q_OB=q_OB, pitch_rad=pitch, yaw_rad=yaw, roll_rad=roll,
+        pitch_raw_rad=pitch_raw, yaw_raw_rad=yaw_raw, roll_raw_rad=roll_raw, time_since_node_s=since,
+        ascending_nodes_tai_ns=nodes, r_I=fr.r_I, v_I=fr.v_I, dropped_tai_ns=fr.dropped_tai_ns, gnss=fit,
+        inertial_frame=frame, orbital_frame=orbital_frame, smoothing=smoothing, smoothing_frame=smoothing_frame,
+        segments=segments,
+    )
+
+
+def _checked_inputs(
+    time_tai_ns: ArrayLike, q_XS: ArrayLike, q_BS: ArrayLike, inertial_frame: str, orbital_frame: str,
+    smoothing_frame: str,
+) -> tuple[NDArray, NDArray, str, NDArray]:
+    """(times (N,) int64, q_XS (N, 4), the canonical inertial frame name, unit q_BS) after the checks."""
     t = np.asarray(time_tai_ns, dtype=np.int64)
     q = np.asarray(q_XS, dtype=np.float64)
     if t.ndim != 1 or q.shape != (t.size, 4):
@@ -277,60 +315,52 @@ def orbital_attitude(
         raise OrbitalAttitudeError(f"orbital_frame must be one of {', '.join(ORBITAL_FRAMES)}, got {orbital_frame!r}")
     if smoothing_frame not in ("orbital", "inertial"):
         raise OrbitalAttitudeError(f"smoothing_frame must be 'orbital' or 'inertial', got {smoothing_frame!r}")
-    q_BS_arr = rotations.quat_normalize(np.asarray(q_BS, dtype=np.float64))
+    return t, q, frame, rotations.quat_normalize(np.asarray(q_BS, dtype=np.float64))
 
-    report(0.1, "GNSS orbit fit")
-    fit = fit_gnss(gnss_time_tai_ns, r_E, v_E, method=gnss_method)
-    covered = fit.covered(t)
-    if not np.any(covered):
-        raise OrbitalAttitudeError("no star-tracker sample lies within the GNSS arcs (the two streams do not "
-                                   "overlap in time)")
+
+@dataclass(frozen=True)
+class _Frames:
+    """Steps 1-3 at the star-tracker samples inside the GNSS arcs (N): times, q_GS (sensor -> GCRS), GCRS
+    state r_I, v_I, the orbital frame q_GO and q_OS = q_GO^-1 o q_GS; the samples dropped (outside)."""
+
+    time_tai_ns: NDArray
+    q_GS: NDArray
+    r_I: NDArray
+    v_I: NDArray
+    q_GO: NDArray
+    q_OS: NDArray
+    dropped_tai_ns: NDArray
+
+
+def _frames(
+    t: NDArray, q: NDArray, covered: NDArray, fit: GnssFit, frame: str, orbital_frame: str, eop: EopSource
+) -> _Frames:
+    """Steps 1-3 on the samples ``covered`` by the GNSS arcs: star tracker to the GCRS, the smoothed GNSS
+    orbit in the GCRS, the orbital frame."""
     dropped = t[~covered]
     t, q = t[covered], rotations.quat_normalize(q[covered])
-
-    report(0.3, "frames")
     eop_t = eop(t) if callable(eop) else (eop or EarthOrientation())
     q_GX = rotations.dcm_to_quat(inertial_to_gcrs_mat(frame, t, eop_t))
     q_GS = rotations.quat_multiply(q_GX, q)
     r_I, v_I, _ = gnss_to_gcrs(fit, t, eop_t)
     q_GO = _q_GO(r_I, v_I, orbital_frame)
-    q_OG = rotations.quat_conjugate(q_GO)
-    q_SB = rotations.quat_conjugate(q_BS_arr)
+    q_OS = rotations.quat_multiply(rotations.quat_conjugate(q_GO), q_GS)
+    return _Frames(t, q_GS, r_I, v_I, q_GO, q_OS, dropped)
 
-    q_OS_raw = rotations.quat_multiply(q_OG, q_GS)
-    q_OB_raw = rotations.quat_canonical(rotations.quat_multiply(q_OS_raw, q_SB))
-    segments: tuple[SmoothingSegment, ...] = ()
-    if smoothing:
-        report(0.5, "smoothing (003 §1.3)")
-        if smoothing_frame == "orbital":
-            q_OS, segments = smooth_attitude(t, q_OS_raw, harmonics=harmonics, trend_degree=trend_degree,
-                                             segment_max_s=segment_max_s, max_gap_s=max_gap_s)
-        else:
-            q_GS_sm, segments = smooth_attitude(t, q_GS, harmonics=harmonics, trend_degree=trend_degree,
-                                                segment_max_s=segment_max_s, max_gap_s=max_gap_s)
-            q_OS = rotations.quat_multiply(q_OG, q_GS_sm)
-        q_OB = rotations.quat_canonical(rotations.quat_multiply(q_OS, q_SB))
-    else:
-        q_OB = q_OB_raw
 
-    report(0.8, "angles and ascending nodes")
-    pitch, yaw, roll = rotations.pitch_yaw_roll_from_quat(q_OB)
-    pitch_raw, yaw_raw, roll_raw = rotations.pitch_yaw_roll_from_quat(q_OB_raw)
-    nodes = ascending_nodes(fit, eop)
-    since = time_since_ascending_node_s(t, r_I, v_I, nodes)
-    q_GB = rotations.quat_canonical(rotations.quat_multiply(q_GO, q_OB))
-    return OrbitalAttitude(
-        time_tai_ns=t, q_GB=q_GB, q_OB=q_OB, pitch_rad=pitch, yaw_rad=yaw, roll_rad=roll,
-        pitch_raw_rad=pitch_raw, yaw_raw_rad=yaw_raw, roll_raw_rad=roll_raw, time_since_node_s=since,
-        ascending_nodes_tai_ns=nodes, r_I=r_I, v_I=v_I, dropped_tai_ns=dropped, gnss=fit,
-        inertial_frame=frame, orbital_frame=orbital_frame, smoothing=smoothing, smoothing_frame=smoothing_frame,
-        segments=segments,
-    )
+def _smoothed_q_OS(
+    fr: _Frames, smoothing_frame: str, **options: Any
+) -> tuple[NDArray, tuple[SmoothingSegment, ...]]:
+    """Step 4: q_OS smoothed by 003 §1.3 in the orbital frame, or q_GS smoothed (003) and taken to O."""
+    if smoothing_frame == "orbital":
+        return smooth_attitude(fr.time_tai_ns, fr.q_OS, **options)
+    q_GS_sm, segments = smooth_attitude(fr.time_tai_ns, fr.q_GS, **options)
+    return rotations.quat_multiply(rotations.quat_conjugate(fr.q_GO), q_GS_sm), segments
 
 
 def summary_of(result: OrbitalAttitude) -> dict[str, Any]:
     """JSON-able figures of a result besides the angle statistics: GNSS fit, smoothing, coverage."""
-    arcsec = np.degrees(1.0) * 3600.0
+    arcsec = ARCSEC_PER_RAD
     seg = [s for s in result.segments if s.smoothed]
     w = np.array([s.stop - s.start for s in seg], dtype=float)
     resid = (np.sqrt(np.sum(w[:, None] * np.stack([s.residual_rms_rad for s in seg]) ** 2, axis=0) / np.sum(w))

@@ -9,7 +9,7 @@ from pydantic import ValidationError
 
 from app.jobs.types.gyroless_ekf import JOB, Params
 from processing.attitude.rotations import quat_to_dcm
-from processing.gyroless.ekf import attitude_errors_rad
+from processing.gyroless.filtering import attitude_errors_rad
 from processing.simulate.seed004 import simulate_seed004
 from processing.spacecraft import Spacecraft
 from processing.tasks import TaskError, TaskInputs, no_progress

@@ -19,14 +19,8 @@ from pydantic import BaseModel, ConfigDict, Field, PositiveFloat
 
 from app.jobs.registry import JobType
 from processing.attitude import rotations
-from processing.gyro_calibration.bias_fit import (
-    GyroBiasFit,
-    GyroBiasFitError,
-    estimate_gyro_arw,
-    fit_gyro_bias,
-    fit_subintervals,
-    subinterval_edges,
-)
+from processing.gyro_calibration.bias_fit import GyroBiasFit, GyroBiasFitError, estimate_gyro_arw, fit_gyro_bias
+from processing.gyro_calibration.subintervals import fit_subintervals, subinterval_edges
 from processing.signal.sine_series import SineSeriesError, fit_sine_series, select_harmonics
 from processing.tasks import Progress, TaskError, TaskInputs, TaskResult
 from processing.time.timescales import tai_ns_to_iso

@@ -40,7 +40,8 @@ from processing.frames.earth_orientation import (
     teme_to_itrs_mat,
 )
 from processing.orbits.two_body import circular_orbit_state
-from processing.time.timescales import iso_to_tai_ns, tai_ns_from_jd, tai_ns_to_jd, tai_ns_to_ut1_jd
+from processing.time.julian_dates import tai_ns_from_jd, tai_ns_to_jd, tai_ns_to_ut1_jd
+from processing.time.timescales import iso_to_tai_ns
 from processing.units import MU_EARTH_M3_S2, OMEGA_EARTH_RAD_S, R_EARTH_M
 
 ARCSEC_RAD = np.pi / (180.0 * 3600.0)

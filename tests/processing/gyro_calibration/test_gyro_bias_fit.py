@@ -12,14 +12,8 @@ import numpy as np
 import pytest
 
 from processing.attitude import rotations as rot
-from processing.gyro_calibration.bias_fit import (
-    GyroBiasFit,
-    GyroBiasFitError,
-    estimate_gyro_arw,
-    fit_gyro_bias,
-    fit_subintervals,
-    subinterval_edges,
-)
+from processing.gyro_calibration.bias_fit import GyroBiasFit, GyroBiasFitError, estimate_gyro_arw, fit_gyro_bias
+from processing.gyro_calibration.subintervals import fit_subintervals, subinterval_edges
 from processing.simulate.seed003 import Scenario003, simulate_seed003
 from processing.units import RAD_PER_ARCSEC, RAD_PER_DEG
 

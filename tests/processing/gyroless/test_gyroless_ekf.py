@@ -10,17 +10,15 @@ from scipy.linalg import expm
 from processing.attitude import rotations
 from processing.attitude.rigid_body import INERTIA_004_KG_M2, RigidBody004, q_OB_from_roll_pitch_yaw_004
 from processing.estimation.consistency import chi_square_stats, nees, whiteness
-from processing.gyroless.ekf import (
-    FilterTuning,
-    GyrolessEKF,
+from processing.gyroless.ekf import FilterTuning, GyrolessEKF, _dcm_v_dq
+from processing.gyroless.filtering import (
     GyrolessInputs,
-    GyrolessMEKF,
-    _dcm_v_dq,
     attitude_errors_rad,
     initial_covariance,
     run_filter,
     triad_q_OB,
 )
+from processing.gyroless.mekf import GyrolessMEKF
 from processing.gyroless.rts_smoother import rts_smooth
 from processing.orbits.two_body import mean_motion_rad_s
 from processing.units import R_EARTH_M

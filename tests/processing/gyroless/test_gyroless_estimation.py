@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from processing.estimation.consistency import chi_square_stats, nees
-from processing.gyroless.ekf import attitude_errors_rad
 from processing.gyroless.estimation import GyrolessError, GyrolessSettings, estimate_gyroless_attitude, hermite_state
+from processing.gyroless.filtering import attitude_errors_rad
 from processing.orbits.two_body import circular_orbit_state
 from processing.simulate.seed004 import simulate_seed004
 from processing.time.timescales import iso_to_tai_ns

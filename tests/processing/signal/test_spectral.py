@@ -16,10 +16,8 @@ from processing.signal.spectral import (
     amplitude_spectrum_gapped,
     amplitude_spectrum_of_samples,
     amplitude_spectrum_uneven,
-    detect_lines,
-    find_lines,
-    fit_sinusoid,
 )
+from processing.signal.spectral_lines import detect_lines, find_lines, fit_sinusoid
 
 
 def _paper_periodogram(x: np.ndarray, h: float, f: np.ndarray, n_index: np.ndarray | None = None) -> np.ndarray:

@@ -4,13 +4,8 @@ import numpy as np
 import pytest
 
 from processing.attitude import rotations
-from processing.signal.two_pass_filter import (
-    TwoPassFilterError,
-    increments_from_rates,
-    interval_rotations,
-    plan_substeps,
-    two_pass_filter,
-)
+from processing.signal.gyro_integration import interval_rotations, plan_substeps
+from processing.signal.two_pass_filter import TwoPassFilterError, increments_from_rates, two_pass_filter
 from processing.simulate.seed000 import simulate_seed000
 
 ARCSEC_RAD = np.pi / 648000.0

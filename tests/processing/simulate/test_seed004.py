@@ -14,7 +14,7 @@ import pytest
 
 from processing.attitude import rotations
 from processing.environment import igrf_field_E_nT
-from processing.gyroless.ekf import attitude_errors_rad
+from processing.gyroless.filtering import attitude_errors_rad
 from processing.simulate.seed004 import Seed004ParameterError, orbit_period_s, simulate_seed004
 from processing.streams import STREAMS
 from processing.time.timescales import iso_to_tai_ns

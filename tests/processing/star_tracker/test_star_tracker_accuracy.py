@@ -13,12 +13,14 @@ import numpy as np
 import pytest
 
 from processing.attitude import rotations
-from processing.signal.spectral import fit_sinusoid
+from processing.signal.spectral_lines import fit_sinusoid
 from processing.simulate.seed003 import simulate_seed003
 from processing.star_tracker.accuracy import (
     StarTrackerAccuracy,
     StarTrackerAccuracyError,
     analyze_star_tracker_accuracy,
+)
+from processing.star_tracker.smoothing import (
     mean_quaternion,
     rate_from_mrp,
     residual_mrps,

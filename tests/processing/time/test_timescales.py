@@ -26,6 +26,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from processing.time.julian_dates import tai_ns_from_jd, tai_ns_to_jd, tai_ns_to_ut1_jd
 from processing.time.timescales import (
     SCALES,
     TAI_MINUS_GPS_S,
@@ -35,12 +36,9 @@ from processing.time.timescales import (
     iso_to_tai_ns,
     seconds_to_tai_ns,
     tai_minus_utc_s,
-    tai_ns_from_jd,
     tai_ns_to_epoch_ns,
     tai_ns_to_iso,
-    tai_ns_to_jd,
     tai_ns_to_seconds,
-    tai_ns_to_ut1_jd,
     utc_leap_second_dates,
 )
 from processing.units import NS_PER_S
