@@ -22,9 +22,10 @@ from app.web.auth import LoginRequired, csrf_token, session_secret
 from storage.keys import role_at_least
 
 TEMPLATES = Path(__file__).parent / "templates"
+REPORT_TEMPLATES = Path(__file__).parents[1] / "reports" / "templates"  # shared partials (warnings.html)
 STATIC = Path(__file__).parent / "static"
 
-env = Environment(loader=FileSystemLoader(TEMPLATES), autoescape=select_autoescape(["html"]),
+env = Environment(loader=FileSystemLoader([TEMPLATES, REPORT_TEMPLATES]), autoescape=select_autoescape(["html"]),
                   trim_blocks=True, lstrip_blocks=True)
 env.filters["iso"] = iso
 env.filters["wall"] = wall
