@@ -20,6 +20,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from app.jobs import worker
 from app.jobs.dispatch import CANCEL_GRACE_S, CatalogDispatcher
+from app.jobs.lifetime import SERVICE_PID_VARIABLE
 from app.settings import Settings
 from storage import jobs as jobstore
 from storage.jobs import ArtifactStore
@@ -41,8 +42,9 @@ class LocalExecutor(CatalogDispatcher[_Running]):
         # OpenBLAS threads made small QR factorisations 5-10x slower on a busy 2-core machine.
         os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
         os.environ.setdefault("OMP_NUM_THREADS", "1")
+        os.environ[SERVICE_PID_VARIABLE] = str(os.getpid())  # the forkserver dies with this process
         self._ctx = mp.get_context("forkserver")
-        self._ctx.set_forkserver_preload(["app.jobs.worker", "app.jobs.preload"])
+        self._ctx.set_forkserver_preload(["app.jobs.forkserver_guard", "app.jobs.worker", "app.jobs.preload"])
 
     def _launch(self, job_id: str) -> None:
         proc = self._ctx.Process(target=worker.run, args=(job_id, self.settings, os.getpid()), name=f"job-{job_id}",

@@ -91,6 +91,19 @@ def alive(pid: int) -> bool:
     return state != "Z"
 
 
+def describe(pids: set[int]) -> dict[int, str]:
+    """pid -> command line and state, for a failure message."""
+    out = {}
+    for pid in pids:
+        try:
+            cmd = Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")[:160]
+            state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+        except OSError:
+            cmd, state = "?", "gone"
+        out[pid] = f"{state} {cmd}"
+    return out
+
+
 def batch_csv(batch: int) -> bytes:
     t0 = 1_685_577_600 + batch * 1000  # distinct windows, 1000 s apart
     lines = [f"{t0 + 0.5 * i:.1f},{batch},{i},{i * 0.5}" for i in range(ROWS)]
@@ -161,7 +174,7 @@ def test_sigkill_during_uploads_and_jobs(tmp_path: Path, database_url: str):
             deadline = time.monotonic() + 10
             while (survivors := {p for p in below if alive(p)}) and time.monotonic() < deadline:
                 time.sleep(0.05)
-            assert not survivors, f"cycle {cycle}: processes outlived the service: {survivors}"
+            assert not survivors, f"cycle {cycle}: processes outlived the service: {describe(survivors)}"
             stop.set()
             for t in threads:
                 t.join(30)

@@ -109,13 +109,13 @@ def test_worker_loss_is_retried_then_failed_with_the_reason(settings, cluster):
         job = wait(client, r.json()["id"], timeout_s=120)
     assert job["status"] == "failed"
     assert "Dask worker running the job died (2 attempts" in job["error"], job["error"]
-    cluster[1].wait_for_workers(2, timeout=60)
+    cluster[1].wait_for_workers(2, timeout=180)
 
 
 @SQLITE_ONLY  # the supervision does not depend on the catalog's backend
 def test_worker_killed_mid_job_is_retried_and_succeeds(settings, cluster):
     _, dclient = cluster
-    dclient.wait_for_workers(2, timeout=60)
+    dclient.wait_for_workers(2, timeout=180)
     with open_client(dask_settings(settings, cluster, dask_retries=1)) as client:
         make_spacecraft(client)
         job_id = client.post("/api/v1/jobs", json={"type": "executor_check", "spacecraft": "sat1",
@@ -131,12 +131,12 @@ def test_worker_killed_mid_job_is_retried_and_succeeds(settings, cluster):
         job = wait(client, job_id, timeout_s=120)
     assert job["status"] == "succeeded", job["error"]
     assert job["result"]["worker_pid"] != killed_pid
-    dclient.wait_for_workers(2, timeout=60)
+    dclient.wait_for_workers(2, timeout=180)
 
 
 @SQLITE_ONLY  # the supervision does not depend on the catalog's backend
 def test_cancel_and_timeout_on_dask(settings, cluster):
-    cluster[1].wait_for_workers(2, timeout=60)
+    cluster[1].wait_for_workers(2, timeout=180)
     with open_client(dask_settings(settings, cluster, job_timeout_s=2)) as client:
         make_spacecraft(client)
         slow = client.post("/api/v1/jobs", json={"type": "executor_check", "spacecraft": "sat1",
@@ -167,7 +167,7 @@ def _fan_out(n_parts: int):
 
 def test_partitions_fan_out_on_the_cluster_and_match_in_process(cluster):
     _, dclient = cluster
-    dclient.wait_for_workers(2, timeout=60)
+    dclient.wait_for_workers(2, timeout=180)
     on_dask = dclient.submit(_fan_out, 10, pure=False).result(timeout=60)
     in_process = _fan_out(10)
     assert [s for s, _ in on_dask] == [s for s, _ in in_process] == [float(sum(range(i * 100, i * 100 + 100)))
