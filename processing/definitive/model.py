@@ -12,7 +12,8 @@ and K the calibration matrix: its diagonal the three scale-factor errors s_x, s_
 off-diagonal elements Pittelkau's misalignment/non-orthogonality parameters. The antisymmetric part of
 the off-diagonal is a small rotation of the whole triad, the symmetric part the non-orthogonality:
 K ~ diag(s) + [delta x] + N with delta = ((K_zy - K_yz)/2, (K_xz - K_zx)/2, (K_yx - K_xy)/2) the rotation
-vector of q_{G_true G} (for 000's w_meas = (1 + m) S^Delta w + b: K = m I + [Delta x]).
+vector of q_{G_true G} (for 000's w_meas = (1 + m) S^Delta w + b: K = m I + [Delta x]); exactly, the polar
+factors of I + K (:func:`misalignment_parts`).
 
 Star tracker j: q_IS_j(t_tag) = q_IB(t_tag + dt) o q_BS_j o exp(n_j), n_j a rotation vector about the
 sensor axes of covariance diag(sigma_j²) (anisotropic: the boresight z is noisier), dt the star-tracker
@@ -180,11 +181,17 @@ def k_matrix(k: FloatArray, layout: StateLayout) -> FloatArray:
 
 
 def misalignment_parts(K: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """(delta, n): the rotation vector of the triad (antisymmetric part of K's off-diagonal) and the
-    non-orthogonality (K_xy + K_yx, K_xz + K_zx, K_yz + K_zy)/2 (its symmetric part)."""
-    delta = 0.5 * np.array([K[2, 1] - K[1, 2], K[0, 2] - K[2, 0], K[1, 0] - K[0, 1]])
-    sym = 0.5 * np.array([K[0, 1] + K[1, 0], K[0, 2] + K[2, 0], K[1, 2] + K[2, 1]])
-    return delta, sym
+    """(delta, n) of I + K = R_delta S (polar decomposition, R_delta a rotation, S symmetric positive):
+    delta the rotation vector of R_delta (the triad's rotation, q_{G_true G} as 000's misalignment) and n the
+    off-diagonal of S (xy, xz, yz: the non-orthogonality). To first order delta is the antisymmetric and n the
+    symmetric part of K's off-diagonal; the polar factor keeps delta exact when the scale factors are not
+    small against 1 (000: (1 + m) S^Delta = R_Delta (1 + m))."""
+    from scipy.linalg import polar
+
+    from processing.attitude.rotations import dcm_to_quat, quat_to_rotvec
+
+    rot, sym = polar(np.eye(3) + K)
+    return quat_to_rotvec(dcm_to_quat(rot)), np.array([sym[0, 1], sym[0, 2], sym[1, 2]])
 
 
 def misalignment_jacobian() -> FloatArray:
