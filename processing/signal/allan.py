@@ -90,7 +90,7 @@ def _design(tau: FloatArray) -> FloatArray:
 
 def _octave_taus(n: int, rate_hz: float) -> FloatArray:
     m = 2.0 ** np.arange(0, int(np.floor(np.log2(max(n // 3, 1)))) + 1)
-    return m / rate_hz
+    return np.asarray(m / rate_hz, dtype=np.float64)
 
 
 def allan_deviation(data: FloatArray, rate_hz: float, kind: str = "rates") -> AllanDeviation:
@@ -176,7 +176,7 @@ def fit_noise(ad: AllanDeviation, iterations: int = 4) -> tuple[NoiseFit, AllanD
             # covariance of the free terms; a term held at zero keeps the variance of its own column
             if np.any(active):
                 cv[np.ix_(active, active)] = np.linalg.pinv(Aw[:, active].T @ Aw[:, active])
-            for j in np.flatnonzero(~active):
+            for j in map(int, np.flatnonzero(~active)):
                 others = np.flatnonzero(active)
                 cols = np.append(others, j)
                 cv[j, j] = np.linalg.pinv(Aw[:, cols].T @ Aw[:, cols])[-1, -1]

@@ -71,9 +71,9 @@ def default_heads(n: int = 2, sigma_rad: tuple[float, float, float] | None = Non
     sig = sigma_rad or (3 * RAD_PER_ARCSEC, 3 * RAD_PER_ARCSEC, 20 * RAD_PER_ARCSEC)
     q1 = rotations.quat_from_axis_angle([1.0, 0.0, 0.0], -150.0 * RAD_PER_DEG)
     q2 = rotations.quat_multiply(rotations.quat_from_axis_angle([0.0, 0.0, 1.0], 100.0 * RAD_PER_DEG), q1)
-    heads = [HeadSpec("st1", tuple(q1.tolist()), sig, period_s)]  # type: ignore[arg-type]
+    heads = [HeadSpec("st1", tuple(q1.tolist()), sig, period_s)]
     if n > 1:
-        heads.append(HeadSpec("st2", tuple(rotations.quat_canonical(q2).tolist()), sig, period_s,  # type: ignore[arg-type]
+        heads.append(HeadSpec("st2", tuple(rotations.quat_canonical(q2).tolist()), sig, period_s,
                               mounting_error_rad=(40 * RAD_PER_ARCSEC, -25 * RAD_PER_ARCSEC, 60 * RAD_PER_ARCSEC)))
     return tuple(heads)
 
