@@ -122,7 +122,8 @@ def test_gyro_noise_rates_quiet_arc() -> None:
     json.dumps(s, allow_nan=False)
     for lo_hi in s["angle_random_walk_ci95_rad_sqrt_s"]:
         assert lo_hi[0] <= arw <= lo_hi[1]
-    assert s["rate_random_walk_observable"] == [False, False, False] and s["rate_random_walk_rad_s_sqrt_s"] == [None] * 3
+    assert s["rate_random_walk_observable"] == [False, False, False]
+    assert s["rate_random_walk_rad_s_sqrt_s"] == [None] * 3
     assert "not_observable" in {w.code for w in res.warnings}
     assert set(NOISE.figures(res, NParams())) == {"allan_deviation"}
 
