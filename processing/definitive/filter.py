@@ -6,7 +6,7 @@ Per epoch j: propagate with the block quantities (processing.definitive.propagat
 exp(G (p^ - p_ref)), P <- Phi P Phi^T + Q; then update with every star-tracker head measured at that
 time, stacked: the residual of head h is the rotation vector z = rotvec((q^_IB o exp(w_B dt^) o
 q^_BS_h)^-1 o q_IS,meas) in the sensor axes, with H = [R_SB, 0, ..., I (mounting of h), ..., R_SB w_B (dt)]
-and R_h = diag(sigma_h²) (anisotropic about the boresight). Joseph-form covariance update; the
+and R_h = diag(sigma_h²) (anisotropic about the boresight). Covariance update (I - K H) P, symmetrised; the
 attitude error is folded into the quaternion after each update (the reset, to first order the identity).
 A head's measurement whose own NIS exceeds the gate is rejected (after ``WARMUP_UPDATES`` updates, so that
 the diffuse start cannot reject everything). The loop runs once per epoch and touches no gyro sample.
@@ -110,6 +110,15 @@ class FilterModel:
     P0: FloatArray
     gate: float
 
+    @property
+    def C_SB(self) -> FloatArray:
+        """R_SB (H, 3, 3) of the configured mountings."""
+        c = self.__dict__.get("_c_sb")
+        if c is None:
+            c = np.stack([dcm(q).T for q in self.q_BS])
+            object.__setattr__(self, "_c_sb", c)
+        return c
+
 
 def head_mounting(model: FilterModel, p: FloatArray, h: int) -> FloatArray:
     sl = model.layout.mount(h)
@@ -128,8 +137,11 @@ def _update(model: FilterModel, q: FloatArray, p: FloatArray, P: FloatArray, mea
     zs, Hs, rs, idx = [], [], [], []
     for i in rows:
         h = int(meas.head[i])
-        q_BS = head_mounting(model, p, h)
-        C_SB = dcm(q_BS).T
+        if lay.mount(h) is None:
+            q_BS, C_SB = model.q_BS[h], model.C_SB[h]
+        else:
+            q_BS = head_mounting(model, p, h)
+            C_SB = dcm(q_BS).T
         z = qlog(qmul(qconj(qmul(q_t, q_BS)), meas.q_IS[i]))
         H = np.zeros((3, n))
         H[:, 0:3] = C_SB
@@ -159,8 +171,7 @@ def _update(model: FilterModel, q: FloatArray, p: FloatArray, P: FloatArray, mea
     S = H @ PHt + R
     K = np.linalg.solve(S, PHt.T).T
     dx = K @ z
-    IKH = np.eye(n) - K @ H
-    P = IKH @ P @ IKH.T + K @ R @ K.T
+    P = P - K @ PHt.T  # (I - K H) P; symmetrised below (the Joseph form costs three more products per epoch)
     P = 0.5 * (P + P.T)
     nis_joint = float(z @ np.linalg.solve(S, z))
     q = qmul(q, qexp(dx[0:3]))
