@@ -39,7 +39,8 @@ class JobType:
 
 
 _MODULES = ("coverage", "executor_check", "star_tracker_accuracy", "gyro_bias_fit", "orbital_attitude", "gyroless_ekf",
-            "alignment_calibration", "data_screening", "vector_attitude", "reconstruction")
+            "alignment_calibration", "data_screening", "vector_attitude", "reconstruction", "definitive_attitude",
+            "gyro_noise")
 
 
 def registry() -> dict[str, JobType]:
