@@ -136,6 +136,8 @@ def _window(session: Session, sc: Spacecraft, jt: JobType, body: JobCreate) -> t
     if jt.any_stream and not extent:
         raise Invalid(f"no telemetry for {sc.name} {where}")
     used = [extent[s] for s in (jt.streams or tuple(extent))]
+    if not used:  # only optional streams, none of them present
+        raise Invalid(f"no {' or '.join(needed)} samples for {sc.name} {where}; job {jt.name} needs one of them")
     lo = start if start is not None else min(a for a, _ in used)
     hi = end if end is not None else max(b for _, b in used)
     return lo, hi

@@ -137,6 +137,11 @@ def test_job_needing_absent_stream_is_rejected(client):
     make_spacecraft(client)
     r = client.post("/api/v1/jobs", json={"type": needs_streams[0].name, "spacecraft": "sat1"})
     assert r.status_code == 422 and "samples" in r.json()["detail"]
+    # A type whose streams are all optional (gyro_noise: gyro or increments) with none stored: 422, not 500.
+    optional_only = [j for j in registry().values() if not j.streams and j.optional_streams]
+    for jt in optional_only:
+        r = client.post("/api/v1/jobs", json={"type": jt.name, "spacecraft": "sat1"})
+        assert r.status_code == 422 and "needs one of them" in r.json()["detail"], (jt.name, r.text)
 
 
 def test_failure_comes_back_with_its_reason(client):
