@@ -28,6 +28,7 @@ from app.jobs.runner import stream_names
 from app.main import create_app
 from app.reports import job_report, sections, specs, summary, trends
 from app.settings import Settings
+from tests.app.figure_geometry import problems as figure_problems
 from tests.app.report_world import (
     SPACECRAFT,
     SPECIFICATIONS,
@@ -68,7 +69,7 @@ def world(tmp_path_factory: pytest.TempPathFactory):
             ids[name] = r.json()["id"]
         jobs = {name: wait(client, job_id, timeout_s=900) for name, job_id in ids.items()}
         yield types.SimpleNamespace(client=client, jobs=jobs, skipped=skipped, sim=worlds[SPACECRAFT],
-                                    where=where, settings=settings)
+                                    where=where, settings=settings, worlds=worlds)
     lines = [f"{k:<28} " + "  ".join(f"{m} {v:6.2f} s" for m, v in sorted(t.items()))
              for k, t in sorted(TIMINGS.items())]
     (output_dir("reports") / "timings.txt").write_text("\n".join(lines) + "\n")
@@ -367,3 +368,61 @@ def test_input_description_counts_gaps_per_sensor():
     assert a["largest_gaps"] == [{"before_tai_ns": 2 * 10**9, "after_tai_ns": 5 * 10**9, "duration_s": 3.0,
                                   "missing": 2}]
     assert a["trailing_s"] == 4.0 and b["n_gaps"] == 0 and b["period_s"] == 10.0
+
+
+# --- figures: drawn in-process on the same simulated data, their geometry checked --------------------
+
+def _run_in_process(world, job_type: str):
+    """(TaskResult, params) of ``job_type`` run directly on the simulated streams of its spacecraft."""
+    from processing.spacecraft import Spacecraft
+    from processing.tasks import TaskInputs, no_progress
+
+    if job_type in world.skipped:
+        pytest.skip(world.skipped[job_type])
+    jt = registry()[job_type]
+    sim = world.worlds[world.where[job_type]]
+    names = stream_names(jt)
+    streams = {k: v for k, v in sim.streams.items() if k in names}
+    times = [np.asarray(v["time_tai_ns"], dtype=np.int64) for v in streams.values()] or [np.array([0])]
+    inputs = TaskInputs(streams=streams, spacecraft=Spacecraft.from_json(config_with_specs(sim.config)),
+                        start_tai_ns=int(min(t.min() for t in times)), end_tai_ns=int(max(t.max() for t in times)),
+                        reference={})
+    params = jt.params.model_validate({})
+    return jt.run(inputs, params, no_progress), params
+
+
+@pytest.mark.parametrize("job_type", all_type_names())
+def test_figures_have_no_overlapping_text(world, job_type):
+    result, params = _run_in_process(world, job_type)
+    figures = registry()[job_type].figures(result, params)
+    found = {name: figure_problems(fig) for name, fig in figures.items()}
+    assert not {k: v for k, v in found.items() if v}, found
+
+
+def test_screening_marks_exactly_the_rejected_samples(world):
+    result, params = _run_in_process(world, "data_screening")
+    fig = registry()["data_screening"].figures(result, params)["flags_timeline"]
+    marks = {line.get_gid(): len(line.get_xdata()) for line in fig.axes[0].get_lines()}
+    per_stream = {s: per["any"]["n_rejected"] for s, per in result.summary["streams"].items()
+                  if per["any"]["n_rejected"]}
+    n_rejected = result.summary["n_rejected"]
+    assert 0 < n_rejected < result.summary["n_total"] // 10  # a few rejections, not the whole window
+    assert sum(n for label, n in marks.items() if "any criterion" in label) == n_rejected
+    assert {label.split(":")[0]: n for label, n in marks.items() if "any criterion" in label} == per_stream
+    for s, per in result.summary["streams"].items():
+        for c, d in per.items():
+            if c != "any" and d["n_rejected"]:
+                assert marks[f"{s} / {c} ({d['n_rejected']})"] == d["n_rejected"], (s, c)
+
+
+def test_angle_statistics_never_straddle_180_degrees(world):
+    result, _ = _run_in_process(world, "vector_attitude")
+    roll = np.asarray(result.tables["attitude"]["roll_deg"], dtype=float)
+    roll = roll[np.isfinite(roll)]
+    stats = result.summary["roll_deg"]
+    continuous = np.degrees(np.unwrap(np.deg2rad(roll)))
+    assert np.abs(np.diff(continuous)).max() < 10.0  # the simulated roll is continuous ...
+    assert np.ptp(roll) > 300.0  # ... and passes +-180 deg in this window
+    assert stats["max"] - stats["min"] == pytest.approx(np.ptp(continuous))  # one range, not a 360 deg spread
+    assert stats["std"] == pytest.approx(np.std(continuous))
+    assert -180.0 < stats["mean"] <= 180.0
