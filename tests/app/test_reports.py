@@ -77,7 +77,7 @@ def world(tmp_path_factory: pytest.TempPathFactory):
 
 @pytest.fixture(scope="module")
 def pdf_tools() -> None:
-    reason = missing_tools({"chromium": "chromium", "pdftoppm": "poppler-utils"})
+    reason = missing_tools({"chromium": "chromium", "pdftoppm": "poppler-utils", "pdftotext": "poppler-utils"})
     if reason:
         pytest.skip(reason)
 
@@ -162,6 +162,16 @@ def test_pdf_report_pages_are_not_blank(world, pdf_tools, job_type):
     assert pages
     for page in pages:
         assert png_ink_fraction(page) > BLANK, f"{page.name} is blank"
+    # page 1 holds the headline table: the job's answers, before anything else
+    pdf_path = output_dir("reports") / f"{job_type}.pdf"
+    first = subprocess.run(["pdftotext", "-f", "1", "-l", "1", "-layout", str(pdf_path), "-"], check=True,
+                           capture_output=True, text=True, timeout=60).stdout
+    rep = world.client.get(f"/api/v1/jobs/{job['id']}/report", params={"format": "json"}).json()
+    rows = rep["headline"]["rows"] + [r for st in rep["headline"]["stages"] for r in st["rows"]]
+    assert rows, "no headline"
+    assert "Result" in first and "Value ± 1σ" in first
+    for row in rows:
+        assert row["text"] in first, (row, first)
 
 
 def test_pdf_without_chromium_is_drawn_by_matplotlib(world, monkeypatch):
@@ -220,6 +230,44 @@ def test_json_report_says_what_was_processed_and_judges_the_specification(world)
     assert rep["window"]["start"] == job["start"] and rep["parameters"] == job["params"]
     html = world.client.get(f"/api/v1/jobs/{job['id']}/report").text
     assert 'id="verdict">FAIL<' in html and "gaps in the window" in html
+
+
+@pytest.mark.parametrize("job_type", all_type_names())
+def test_headline_first_with_units_frames_and_verdicts(world, job_type):
+    job = finished(world, job_type)
+    rep = world.client.get(f"/api/v1/jobs/{job['id']}/report", params={"format": "json"}).json()
+    headline = rep["headline"]
+    rows = headline["rows"] + [r for st in headline["stages"] for r in st["rows"]]
+    assert rows
+    for r in rows:
+        assert set(r) >= {"quantity", "component", "value", "sigma", "unit", "frame", "verdict", "text"}
+        assert r["verdict"] in ("PASS", "FAIL", "UNDETERMINED", "")
+        if r["component"] in ("x", "y", "z", "x1", "x2", "x3"):  # a vector: its frame is named
+            assert r["frame"], r
+    assert headline["verdict"] == rep["specifications"]["verdict"]
+    html = world.client.get(f"/api/v1/jobs/{job['id']}/report").text
+    order = [html.find(marker) for marker in ('id="headline"', 'id="figures"', '<h2 id="processed">',
+                                              '<h2 id="parameters">', '<h2 id="summary">')]
+    present = [i for i in order if i >= 0]
+    assert order[0] >= 0 and present == sorted(present), order  # answers, figures, then the collapsed rest
+    assert '<details class="section"><summary><h2 id="processed">' in html  # collapsed in the HTML
+    if job_type == "gyro_bias_fit":
+        bias = [r for r in rows if r["key"] == "gyro_bias_rad_s"]
+        assert [r["component"] for r in bias] == ["x", "y", "z"] and {r["unit"] for r in bias} == {"deg/h"}
+        assert all(r["sigma"] > 0 and r["frame"] == "body (B)" and r["verdict"] == "PASS" for r in bias)
+        truth = rep["summary"]["gyro_bias_rad_s"]
+        assert [r["value"] for r in bias] == pytest.approx([v * 180 / math.pi * 3600 for v in truth])
+    if job_type == "star_tracker_accuracy":
+        assert [(r["component"], r["verdict"]) for r in rows] == [("x1", "PASS"), ("x2", "PASS"), ("x3", "PASS")]
+        assert rows[0]["frame"] == "star tracker st1 (S)"
+    if job_type == "telemetry_coverage":
+        assert rows[0]["key"] == "n_gaps" and rows[0]["verdict"] == "FAIL"
+    if job_type == "reconstruction":
+        stages = {st["stage"]: st for st in headline["stages"]}
+        assert set(stages) >= {"data_screening", "star_tracker_accuracy", "gyro_bias_fit", "orbital_attitude"}
+        assert stages["star_tracker_accuracy"]["verdict"] == "pass" and headline["verdict"] != "none"
+        assert any(c["key"] == "stages.gyro_bias_fit.summary.gyro_bias_rad_s"
+                   for c in rep["specifications"]["checks"])
 
 
 def test_unknown_report_format_is_refused(world):

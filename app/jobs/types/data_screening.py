@@ -15,6 +15,7 @@ from matplotlib.figure import Figure
 from pydantic import BaseModel, ConfigDict, Field
 
 from app.jobs.registry import JobType
+from app.reports.headline import Answer
 from processing.screening.criteria import ScreeningParams, screen
 from processing.screening.flags import flags_table
 from processing.tasks import Progress, TaskError, TaskInputs, TaskResult
@@ -231,4 +232,7 @@ JOB = JobType(
                 "criteria it fails: energy integral (eq. 15, J2-aware), field magnitude against IGRF-14 (eq. 16), "
                 "panel currents against the shadow/unit-sun models (eq. 17), orbit plane, kinematic and velocity "
                 "consistency, spikes, stuck values and time-grid errors. Nothing is deleted.",
+    headline=(Answer("n_rejected", "Rejected samples, all streams"),
+              Answer("rejected_fraction", "Rejected share of the samples", unit="%", scale=100.0),
+              Answer("streams.*.any.n_rejected", "Rejected samples per stream")),
 )

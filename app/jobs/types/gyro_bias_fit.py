@@ -18,6 +18,7 @@ from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field, PositiveFloat
 
 from app.jobs.registry import JobType
+from app.reports.headline import Answer
 from processing.attitude import rotations
 from processing.gyro_calibration.bias_fit import GyroBiasFit, GyroBiasFitError, estimate_gyro_arw, fit_gyro_bias
 from processing.gyro_calibration.subintervals import fit_subintervals, subinterval_edges
@@ -527,4 +528,8 @@ JOB = JobType(
         "(gyro-noise) and paper sigmas, residuals per sensor axis, sub-interval offsets and, optionally, "
         "the mounting with an observability check."
     ),
+    headline=(Answer("gyro_bias_rad_s", "Gyro bias b (w_meas = w + b)", sigma="gyro_bias_sigma_rad_s",
+                     frame="body (B)"),
+              Answer("star_tracker_sigma_arcsec", "Star-tracker noise 1σ", frame="star tracker {reference_sensor} (S)"),
+              Answer("residual_rms_arcsec", "Fit residual rms", frame="star tracker {reference_sensor} (S)")),
 )

@@ -16,6 +16,7 @@ from matplotlib.figure import Figure
 from pydantic import BaseModel, ConfigDict, Field
 
 from app.jobs.registry import JobType
+from app.reports.headline import Answer
 from processing.gyroless.ekf import FilterTuning
 from processing.gyroless.estimation import GyrolessError, GyrolessResult, GyrolessSettings, estimate_gyroless_attitude
 from processing.star_tracker.orbital_attitude import angle_stats_deg
@@ -320,4 +321,9 @@ JOB = JobType(
     description="Attitude q_OB (orbital frame of 004), rates and in-plane disturbance torque from magnetometer, "
                 "sun sensor and GNSS with the EKF of paper 004 or a multiplicative EKF, plus an RTS smoother; "
                 "reference field IGRF-14, Sun from ERFA; consistency by NIS and innovation whiteness.",
+    headline=(*(Answer(f"{a}_deg.mean", f"{a.capitalize()}, mean over the window", sigma=f"{a}_deg.std",
+                       sigma_label="std", frame="body B in the orbital frame O (004)")
+                for a in ("roll", "pitch", "yaw")),
+              Answer("attitude_sigma_deg.median", "Attitude estimate 1σ (median)", frame="about the body axes (B)"),
+              Answer("converged", "Filter converged")),
 )

@@ -14,6 +14,7 @@ from matplotlib.figure import Figure
 from pydantic import BaseModel, ConfigDict, Field
 
 from app.jobs.registry import JobType
+from app.reports.headline import Answer
 from processing.screening.criteria import ScreeningParams, screen
 from processing.star_tracker.orbital_attitude import angle_stats_deg
 from processing.tasks import Progress, TaskError, TaskInputs, TaskResult
@@ -203,4 +204,9 @@ JOB = JobType(
                 "navigation satellites, eqs. 5-7), the magnetometer against IGRF-14 and the sun vector from the "
                 "panel currents; strongly coupled Wahba solution (eqs. 8-9) with three vectors, loosely coupled "
                 "scheme (eqs. 10-14) with magnetometer + antenna, chosen per epoch (figure 1).",
+    headline=(*(Answer(f"{a}_deg.mean", f"{a.capitalize()}, mean over the window", sigma=f"{a}_deg.std",
+                       sigma_label="std", frame="body B in the orbital frame O of 002")
+                for a in ("pitch", "yaw", "roll")),
+              Answer("bound99_deg_median", "99 % attitude error bound (median)", unit="deg"),
+              Answer("availability", "Epochs with an attitude", unit="%", scale=100.0)),
 )
