@@ -45,7 +45,8 @@ from storage.telemetry import ConflictError, IngestMeta
 router = APIRouter(prefix="/ui", route_class=HtmlRoute, include_in_schema=False)
 root_router = APIRouter(include_in_schema=False)
 
-STATIC_FILES = {"app.css": "text/css; charset=utf-8", "app.js": "text/javascript; charset=utf-8"}
+STATIC_FILES = {"app.css": "text/css; charset=utf-8", "app.js": "text/javascript; charset=utf-8",
+                "viewer.js": "text/javascript; charset=utf-8", "forms.js": "text/javascript; charset=utf-8"}
 EXTENSION_TYPES = {".csv": "text/csv", ".parquet": "application/vnd.apache.parquet",
                    ".pq": "application/vnd.apache.parquet", ".arrow": "application/vnd.apache.arrow.stream",
                    ".arrows": "application/vnd.apache.arrow.stream", ".json": "application/json"}
