@@ -212,6 +212,28 @@ def read_window(session: Session, store: ParquetStore, spacecraft_id: int, spec:
     return _sort_unique(table, spec).select(list(empty_table(spec).schema.names))
 
 
+def read_series(session: Session, store: ParquetStore, spacecraft_id: int, spec: StreamSpec, sensor: str,
+                start_tai_ns: int | None = None, end_tai_ns: int | None = None) -> pa.Table:
+    """One sensor's stored samples in [start, end] sorted by time, for plotting a long window fast.
+
+    The same samples as :func:`read_window` with ``sensor``, ordered by time (then by the other key
+    columns, e.g. panels, in stored order) instead of by identity: a table already in time order (one
+    file, or files that follow each other, the usual case) is not sorted again."""
+    files = [f for f in _files_in_window(session, spacecraft_id, spec.name, start_tai_ns, end_tai_ns)
+             if sensor in f.sensors.split(",")]
+    tables = _read_files(session, store, sorted(files, key=lambda f: f.t_min_tai_ns), start_tai_ns, end_tai_ns)
+    if not tables:
+        return empty_table(spec)
+    table = pa.concat_tables(tables, promote_options="permissive")
+    if any(f.sensors != sensor for f in files):  # files of this sensor alone need no filtering
+        table = table.filter(pa.compute.equal(table.column("sensor"), sensor))
+    table = table.select(list(empty_table(spec).schema.names))
+    t = table.column(TIME_COLUMN).to_numpy()
+    if t.size > 1 and not bool(np.all(t[1:] >= t[:-1])):
+        table = table.take(pa.array(np.argsort(t, kind="stable")))
+    return table
+
+
 def arrow_schema(spec: StreamSpec) -> pa.Schema:
     types = {"float": pa.float64(), "int": pa.int64(), "str": pa.string(), "bool": pa.bool_()}
     return pa.schema([(TIME_COLUMN, pa.int64()), ("sensor", pa.string()),

@@ -10,6 +10,7 @@ and sensor in the window (the plot is a decimation of them), with the screening 
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -32,7 +33,7 @@ from processing.units import NS_PER_S
 from storage.jobs import ArtifactStore
 from storage.models import Artifact, Job, Spacecraft, TelemetryFile
 from storage.parquet_store import ParquetStore
-from storage.telemetry import read_window
+from storage.telemetry import read_series
 
 MAX_POINTS = 8000  # per series and request, whatever the width asked for
 MAX_SERIES = 12  # streams keyed by more than sensor and time (panels, satellites): the first groups
@@ -114,7 +115,7 @@ def select_view(session: Session, name: str, who: Principal, stream: str | None,
 
 def read_view(session: Session, store: ParquetStore, sel: Selection) -> pa.Table:
     """Every stored sample of the selection, sorted by time."""
-    return read_window(session, store, sel.spacecraft.id, sel.spec, sel.start_tai_ns, sel.end_tai_ns, sel.sensor)
+    return read_series(session, store, sel.spacecraft.id, sel.spec, sel.sensor, sel.start_tai_ns, sel.end_tai_ns)
 
 
 def _groups(table: pa.Table, spec: StreamSpec) -> list[tuple[str, NDArray[np.bool_] | None]]:
@@ -142,18 +143,19 @@ def decimate(t_ns: NDArray[np.int64], y: NDArray[np.float64], n_out: int) -> NDA
 def plot_data(table: pa.Table, sel: Selection, width_px: int) -> dict[str, Any]:
     """The decimated series of every numeric column (times in seconds since the window start)."""
     n_out = int(min(MAX_POINTS, max(200, 2 * width_px)))
-    t_all = table.column(TIME_COLUMN).to_numpy().astype(np.int64)
+    t_all = np.asarray(table.column(TIME_COLUMN).to_numpy(), dtype=np.int64)
     numeric = [c.name for c in sel.spec.columns if c.kind in ("float", "int", "bool")
                and c.name not in sel.spec.key_columns]
     panels = []
     n_plotted = 0
     for column in numeric:
         series = []
-        values = table.column(column).to_numpy(zero_copy_only=False).astype(np.float64)
+        values = np.asarray(table.column(column).to_numpy(zero_copy_only=False), dtype=np.float64)
         for label, mask in _groups(table, sel.spec):
             t, y = (t_all, values) if mask is None else (t_all[mask], values[mask])
             ok = np.isfinite(y)
-            t, y = t[ok], y[ok]
+            if not ok.all():
+                t, y = t[ok], y[ok]
             idx = decimate(t, y, n_out)
             n_plotted += idx.size
             series.append({"label": label or column, "n": int(t.size),
@@ -164,11 +166,26 @@ def plot_data(table: pa.Table, sel: Selection, width_px: int) -> dict[str, Any]:
 
 
 def _flags(store: ArtifactStore, session: Session, job: Job) -> pa.Table | None:
+    """The rejected rows of the job's ``flags`` table (every screened sample has a row there)."""
     art = session.scalar(select(Artifact).where(Artifact.job_id == job.id, Artifact.name == FLAGS_ARTIFACTS[job.type]))
     if art is None:
         return None
     path = store.path(art)
-    return pq.read_table(path) if path.is_file() else None
+    if not path.is_file():
+        return None
+    st = path.stat()
+    return _rejected_rows(str(path), st.st_mtime_ns, st.st_size)
+
+
+@functools.lru_cache(maxsize=16)
+def _rejected_rows(path: str, _mtime_ns: int, _size: int) -> pa.Table:
+    """Rejected rows of a stored flags table (a finished job's artifact never changes: cached by path,
+    modification time and size). Only the columns needed, strings kept dictionary-encoded."""
+    table = pq.read_table(path, columns=[TIME_COLUMN, "stream", "sensor", "accepted", "reasons"],
+                          read_dictionary=["stream", "sensor", "reasons"])
+    bad = table.filter(pc.invert(table.column("accepted")))
+    return pa.table({c: bad.column(c).cast(pa.string()) if c in ("stream", "sensor", "reasons") else bad.column(c)
+                     for c in bad.column_names})
 
 
 def _statistics(store: ArtifactStore, session: Session, job: Job) -> pa.Table | None:

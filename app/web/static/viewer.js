@@ -173,7 +173,8 @@
       tt.ticks.forEach(function (t) {
         var x = Math.round(X(t)) + 0.5;
         g.strokeStyle = "#eee"; g.beginPath(); g.moveTo(x, TOP); g.lineTo(x, TOP + ph); g.stroke();
-        if (last) { g.fillText(fmtT(t, tt.step), x, TOP + ph + 5); }
+        var label = fmtT(t, tt.step), half = g.measureText(label).width / 2;
+        if (last && x - half >= 0 && x + half <= width) { g.fillText(label, x, TOP + ph + 5); }
       });
       if (last) {
         g.textAlign = "left";
