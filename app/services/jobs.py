@@ -21,6 +21,7 @@ from app.services.downloads import StoredFile
 from app.services.errors import Conflict, Gone, Invalid, NotFound
 from app.services.pages import Page, page_of, paginate
 from app.services.spacecraft import get_spacecraft, latest_config
+from app.services.suggest import did_you_mean, field_errors
 from app.services.times import iso
 from app.settings import Settings
 from app.version import __version__
@@ -81,7 +82,7 @@ def get_job_type(name: str) -> JobType:
     jobs = registry()
     jt = jobs.get(name)
     if jt is None:
-        raise Invalid(f"unknown job type {name!r}; types: {', '.join(sorted(jobs))}")
+        raise Invalid(f"unknown job type {name!r}{did_you_mean(name, jobs)}; types: {', '.join(sorted(jobs))}")
     return jt
 
 
@@ -90,8 +91,7 @@ def validated_params(jt: JobType, params: dict[str, Any]) -> BaseModel:
     try:
         return jt.params.model_validate(params)
     except ValidationError as exc:
-        errors = [{"row": None, "column": "params." + ".".join(str(p) for p in e["loc"]), "message": e["msg"]}
-                  for e in exc.errors()]
+        errors = field_errors(exc, jt.params, prefix="params.")
         raise Invalid({"message": f"invalid params for {jt.name}", "errors": errors}) from None
 
 

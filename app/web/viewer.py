@@ -46,7 +46,8 @@ def viewer_page(request: Request, name: str, session: SessionDep, who: WebViewer
 
 @data_router.get("/data.json")
 def viewer_data(request: Request, name: str, session: SessionDep, store: StoreDep, settings: SettingsDep,
-                stream: str, sensor: str, start: str, end: str, screening: str = "none",
+                stream: str | None = None, sensor: str | None = None, start: str | None = None,
+                end: str | None = None, screening: str = "none",
                 width: Annotated[int, Query(ge=100, le=4000)] = DEFAULT_WIDTH_PX) -> JSONResponse:
     """The decimated plot data of one window (fetched by static/viewer.js on load, zoom and pan)."""
     who = current_principal(request)
@@ -67,8 +68,8 @@ def viewer_data(request: Request, name: str, session: SessionDep, store: StoreDe
 
 @router.get("/download.{fmt}")
 def viewer_download(name: str, fmt: str, session: SessionDep, store: StoreDep, settings: SettingsDep,
-                    who: WebViewer, stream: str, sensor: str, start: str, end: str,
-                    screening: str = "none") -> Response:
+                    who: WebViewer, stream: str | None = None, sensor: str | None = None, start: str | None = None,
+                    end: str | None = None, screening: str = "none") -> Response:
     """Exactly the view: every stored sample of the stream and sensor in the window, with ``rejected_by``."""
     if fmt not in ("csv", "parquet"):
         raise NotFound(f"no download format {fmt!r}; csv or parquet")
