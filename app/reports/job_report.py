@@ -154,6 +154,26 @@ def stage_headlines(summary: dict[str, Any] | None,
     return out
 
 
+def brief(job: Job, job_type: JobType | None, specifications: speclib.Specifications | None) -> dict[str, Any]:
+    """The headline of a finished job in one line (for job lists): the first answer, all its components,
+    and the verdict of every answer."""
+    summary = (job.result or {}).get("summary") if job.status == "succeeded" else None
+    if not summary:
+        return {"text": "", "verdict": "none"}
+    checks = speclib.evaluate(job.type, summary, specifications)
+    stages = stage_headlines(summary, specifications)
+    checks += [c for st in stages for c in st.pop("checks")]
+    answers = job_type.headline if job_type is not None and job_type.headline is not None else \
+        headlib.default_answers(summary, checks)
+    rows = headlib.rows(answers, summary, checks) or [r for st in stages for r in st["rows"]]
+    if not rows:
+        return {"text": "", "verdict": speclib.verdict(checks)}
+    first = [r for r in rows if r["key"] == rows[0]["key"]]
+    values = ", ".join(r["text"] for r in first)
+    unit = f" {first[0]['unit']}" if first[0]["unit"] else ""
+    return {"text": f"{first[0]['quantity']}: {values}{unit}", "verdict": speclib.verdict(checks)}
+
+
 def report_json(job: Job, sc: Spacecraft, job_type: JobType | None, *,
                 telemetry: ParquetStore | None = None) -> dict[str, Any]:
     """The report as a JSON document (also the data the HTML and PDF are drawn from).

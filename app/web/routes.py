@@ -126,6 +126,7 @@ def spacecraft_page(request: Request, name: str, session: SessionDep, who: WebVi
         raise HTTPException(422, "end must be after start")
     tl = coverage.build(session, sc.id, t0, t1)
     retractions = ingests.retractions(session, name, who, 20)
+    recent = [(j, sc.name) for j in jobs.recent_jobs(session, sc, 20)]
     is_admin = who.role == "admin"
     return page(request, "spacecraft.html", sc=sc, config=cfg, specs=speclib.parse(cfg.config), timeline=tl,
                 retractions=retractions, retracted=next((r for r in retractions if r.id == retracted), None),
@@ -134,7 +135,7 @@ def spacecraft_page(request: Request, name: str, session: SessionDep, who: WebVi
                 created=bool(created), saved_version=config_version,
                 geometry=timeline.geometry(tl) if tl is not None else None,
                 ingests=telemetry.recent_ingests(session, sc, 20),
-                jobs=[(j, sc.name) for j in jobs.recent_jobs(session, sc, 20)], streams=list(STREAMS),
+                jobs=recent, briefs=jobs.briefs(session, recent), streams=list(STREAMS),
                 formats=sorted(d.name for d in telemetry.list_formats()), time_scales=TIME_SCALES,
                 view_start=start or "", view_end=end or "",
                 uploaded=telemetry.find_ingest(session, sc, uploaded) if uploaded else None,
