@@ -215,7 +215,8 @@ def trends_csv(name: str, session: SessionDep, who: WebViewer, type: str | None 
                end: str | None = None) -> Response:
     sel = trends.select_trends(session, name, who, type or None, _stripped(start), _stripped(end))
     buf = io.StringIO()
-    fields = ["job_id", "job_type", "series", "window_start", "window_end", "metric", "component", "value", "unit"]
+    fields = ["job_id", "job_type", "series", "window_start", "window_end", "metric", "component", "value", "unit",
+              "sigma"]
     writer = csv.DictWriter(buf, fieldnames=fields, lineterminator="\n")
     writer.writeheader()
     writer.writerows(trendlib.rows(sel.trends))

@@ -474,3 +474,29 @@ def test_angle_statistics_never_straddle_180_degrees(world):
     assert stats["max"] - stats["min"] == pytest.approx(np.ptp(continuous))  # one range, not a 360 deg spread
     assert stats["std"] == pytest.approx(np.std(continuous))
     assert -180.0 < stats["mean"] <= 180.0
+
+
+def test_trend_figures_have_error_bars_full_dates_and_continuous_angles():
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.container import ErrorbarContainer
+
+    rad_s = math.pi / 180 / 3600  # 1 deg/h
+    jobs = [_fake_job(str(i), "gyro_bias_fit", i * 40 * 86400, {"gyro_bias_rad_s": [rad_s * (1 + i), 0.0, -rad_s],
+                                                                 "gyro_bias_sigma_rad_s": [0.1 * rad_s] * 3})
+            for i in range(3)]
+    jobs += [_fake_job(f"o{i}", "orbital_attitude", i * 86400, {"roll_deg": {"min": r - 1, "mean": r, "max": r + 1}})
+             for i, r in enumerate((178.0, 179.5, -179.5, -178.0))]
+    got = {t.metric.key: t for t in trends.trends(jobs, trends.KEY_METRICS, None)}
+    bias = got["gyro_bias_rad_s"]
+    assert bias.points[0].sigmas == pytest.approx((0.1, 0.1, 0.1))
+    assert [r["sigma"] for r in trends.rows([bias])] == pytest.approx([0.1] * 9)
+    fig = trends.figure(bias)
+    FigureCanvasAgg(fig).draw()
+    ax = fig.axes[0]
+    assert any(isinstance(c, ErrorbarContainer) for c in ax.containers)
+    ticks = [t.get_text() for t in ax.get_xticklabels() if t.get_text()]
+    assert ticks and all(re.match(r"\d{4}-\d{2}-\d{2}", t) for t in ticks), ticks  # year, month and day
+    assert not figure_problems(fig)
+    roll = trends.figure(got["roll_deg"])
+    means = roll.axes[0].get_lines()[1].get_ydata()  # components min, mean, max: the mean line
+    assert np.abs(np.diff(means)).max() < 5.0  # 179.5 -> -179.5 drawn as a 1 degree step, not 359
