@@ -321,7 +321,12 @@ def render_html(data: dict[str, Any], job: Job, store: ArtifactStore, *, ui: boo
 
 def _facts(data: dict[str, Any]) -> list[tuple[str, str]]:
     """Key facts of a report as text lines (for the PDF drawn without Chromium)."""
+    rows = data["headline"]["rows"] + [r for st in data["headline"]["stages"] for r in st["rows"]]
+    answers = [(f"{r['quantity']} {r['component']}".strip(),
+                " ".join(x for x in (r["text"], r["unit"], f"[{r['frame']}]" if r["frame"] else "", r["verdict"]) if x))
+               for r in rows]
     facts = [("Spacecraft", data["spacecraft"]), ("Job", f"{data['job']['id']} ({data['job']['status']})"),
+             *answers,
              ("Window (UTC)", f"{data['window']['start']} .. {data['window']['end']}"),
              ("Inputs", "; ".join(f"{s}: " + ", ".join(f"{k} {n}" for k, n in v.items())
                                   for s, v in data["inputs"].items()) or "none"),
