@@ -200,10 +200,10 @@ def report_json(job: Job, sc: Spacecraft, job_type: JobType | None, *,
     streams = sorted(set(inputs) | set(job_type.streams if job_type else ()))
     answers = job_type.headline if job_type is not None and job_type.headline is not None else \
         headlib.default_answers(summary, checks)
-    return {
+    return {  # the warnings and the answers first (a reader of the JSON sees them before anything else)
+        "warnings": (stored.get("summary") or {}).get("warnings", []),
         "headline": {"verdict": speclib.verdict(checks), "rows": headlib.rows(answers, summary, checks),
                      "stages": stages},
-        "warnings": (stored.get("summary") or {}).get("warnings", []),
         "retracted_inputs": retracted_by_job(session, [job.id]).get(job.id, []) if session is not None else [],
         "job": {"id": job.id, "type": job.type, "title": job_type.title if job_type else job.type,
                 "paper": job_type.paper if job_type else "", "description": job_type.description if job_type else "",
