@@ -472,7 +472,7 @@ def test_angle_statistics_never_straddle_180_degrees(world):
     assert np.abs(np.diff(continuous)).max() < 10.0  # the simulated roll is continuous ...
     assert np.ptp(roll) > 300.0  # ... and passes +-180 deg in this window
     assert stats["max"] - stats["min"] == pytest.approx(np.ptp(continuous))  # one range, not a 360 deg spread
-    assert stats["std"] == pytest.approx(np.std(continuous))
+    assert stats["std"] == pytest.approx(np.std(continuous, ddof=1))
     assert -180.0 < stats["mean"] <= 180.0
 
 
