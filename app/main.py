@@ -16,7 +16,7 @@ from sqlalchemy import text
 from app.api.deps import RejectUnknownQuery
 from app.api.errors import COMMON_ERRORS, handle_service_errors
 from app.api.middleware import BodyLimitMiddleware, RateLimiter, SecurityHeadersMiddleware
-from app.api.routes import exports, jobs, keys, reference, schedules, spacecraft, telemetry
+from app.api.routes import exports, ingests, jobs, keys, reference, schedules, spacecraft, telemetry
 from app.jobs.dask_executor import make_executor
 from app.jobs.scheduler import Scheduler
 from app.settings import Settings
@@ -111,6 +111,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
     app.include_router(spacecraft.router, responses=COMMON_ERRORS, dependencies=[RejectUnknownQuery])
     app.include_router(telemetry.router, responses=COMMON_ERRORS, dependencies=[RejectUnknownQuery])
+    app.include_router(ingests.router, responses=COMMON_ERRORS, dependencies=[RejectUnknownQuery])
     app.include_router(telemetry.formats_router, responses=COMMON_ERRORS, dependencies=[RejectUnknownQuery])
     app.include_router(keys.router, responses=COMMON_ERRORS, dependencies=[RejectUnknownQuery])
     app.include_router(jobs.router, responses=COMMON_ERRORS, dependencies=[RejectUnknownQuery])

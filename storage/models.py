@@ -290,3 +290,38 @@ class Calibration(Base):
     values: Mapped[dict[str, Any]]
     job_id: Mapped[str | None] = mapped_column(ForeignKey("job.id", ondelete="SET NULL"), nullable=True)
     created_at: Mapped[dt.datetime] = mapped_column(default=utcnow)
+
+
+class IngestRetraction(Base):
+    """The log of a retracted ingest: what it had stored, who retracted it, when and why."""
+
+    __tablename__ = "ingest_retraction"
+    __table_args__ = (Index("ix_retraction_sc", "spacecraft_id", "retracted_at"),)
+
+    id: Mapped[str] = mapped_column(String(32), primary_key=True, default=new_id)
+    spacecraft_id: Mapped[int] = mapped_column(ForeignKey("spacecraft.id", ondelete="CASCADE"))
+    ingest_id: Mapped[str] = mapped_column(String(32))  # the ingest row is gone; its id stays here
+    stream: Mapped[str] = mapped_column(String(32))
+    sensor: Mapped[str] = mapped_column(String(200))
+    rows: Mapped[int] = mapped_column(Integer)
+    inserted: Mapped[int] = mapped_column(Integer)  # samples it had stored (now removed)
+    start_tai_ns: Mapped[int] = mapped_column(BigInteger)
+    end_tai_ns: Mapped[int] = mapped_column(BigInteger)
+    filename: Mapped[str | None] = mapped_column(String(255), nullable=True)
+    checksum_sha256: Mapped[str] = mapped_column(String(64))
+    uploaded_at: Mapped[dt.datetime]
+    files_removed: Mapped[int] = mapped_column(Integer)
+    reason: Mapped[str] = mapped_column(Text)
+    retracted_by: Mapped[str | None] = mapped_column(String(32), nullable=True)  # API key id
+    retracted_by_name: Mapped[str | None] = mapped_column(String(100), nullable=True)
+    retracted_at: Mapped[dt.datetime] = mapped_column(default=utcnow)
+
+
+class JobRetraction(Base):
+    """A job that had read samples of a retracted ingest: its results rest on retracted data."""
+
+    __tablename__ = "job_retraction"
+
+    job_id: Mapped[str] = mapped_column(ForeignKey("job.id", ondelete="CASCADE"), primary_key=True)
+    retraction_id: Mapped[str] = mapped_column(ForeignKey("ingest_retraction.id", ondelete="CASCADE"),
+                                               primary_key=True)

@@ -10,6 +10,7 @@ from __future__ import annotations
 import datetime as dt
 import logging
 import re
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
 import numpy as np
@@ -21,7 +22,7 @@ from sqlalchemy.orm import Session, sessionmaker
 from processing.streams import TIME_COLUMN, StreamSpec
 from storage.errors import DamagedFileError
 from storage.locks import stream_lock
-from storage.models import Ingest, TelemetryFile
+from storage.models import Ingest, IngestRetraction, Job, JobRetraction, TelemetryFile
 from storage.parquet_store import ParquetStore
 
 log = logging.getLogger("attitude.storage")
@@ -119,20 +120,80 @@ def restore_file(session: Session, store: ParquetStore, file_id: int) -> Telemet
     return f
 
 
-def retract_ingest(session: Session, store: ParquetStore, ingest_id: str) -> list[str]:
+USED_BY_STATUSES = ("succeeded", "failed", "running")
+"""Jobs in these states may have read an ingest's samples (queued jobs will read the store as it is then)."""
+
+
+def _jobs_that_used(session: Session, record: Ingest, reads: Callable[[str], Iterable[str]] | None) -> list[str]:
+    """Ids of the jobs of the spacecraft whose window overlaps the ingest and that read its stream and
+    sensors: by the inputs a finished job recorded, or (running jobs, which have recorded none) by
+    ``reads(job type)``, the streams the type reads (every running job in the window without it)."""
+    sensors = set(record.sensor.split(","))
+    candidates = session.scalars(select(Job).where(
+        Job.spacecraft_id == record.spacecraft_id, Job.status.in_(USED_BY_STATUSES),
+        Job.start_tai_ns <= record.end_tai_ns, Job.end_tai_ns >= record.start_tai_ns))
+    used = []
+    for job in candidates:
+        inputs = (job.result or {}).get("inputs")
+        if isinstance(inputs, dict):
+            if record.stream in inputs and sensors & set(inputs[record.stream] or ()):
+                used.append(job.id)
+        elif job.status == "running" and (reads is None or record.stream in set(reads(job.type))):
+            used.append(job.id)
+    return used
+
+
+def retract_ingest(session: Session, store: ParquetStore, ingest_id: str, *, reason: str = "",
+                   retracted_by: str | None = None, retracted_by_name: str | None = None,
+                   reads: Callable[[str], Iterable[str]] | None = None) -> list[str]:
     """Delete an ingest and its files (a mistaken upload, or one whose file is damaged); commits.
 
-    The catalog rows go first (readers stop seeing the samples at the commit), then the files.
-    Returns the paths removed."""
+    In the same transaction as the delete, the retraction is logged (an ``ingest_retraction`` row: what
+    the ingest held, who, when, why) and the jobs that had read its samples are linked to it
+    (``job_retraction``: their results rest on retracted data). Nothing else changes: other ingests'
+    samples and other jobs stay as they are. The catalog rows go first (readers stop seeing the samples
+    at the commit), then the files. Returns the paths removed; :func:`retraction_of` finds the log entry."""
     record = session.get(Ingest, ingest_id)
     if record is None:
         raise LookupError(f"no ingest {ingest_id}")
     paths = [f.path for f in record.files]
     with stream_lock(session, record.spacecraft_id, record.stream):
+        log_row = IngestRetraction(
+            spacecraft_id=record.spacecraft_id, ingest_id=record.id, stream=record.stream, sensor=record.sensor,
+            rows=record.rows, inserted=record.inserted, start_tai_ns=record.start_tai_ns,
+            end_tai_ns=record.end_tai_ns, filename=record.filename, checksum_sha256=record.checksum_sha256,
+            uploaded_at=record.created_at, files_removed=len(paths), reason=reason[:4000],
+            retracted_by=retracted_by, retracted_by_name=retracted_by_name)
+        session.add(log_row)
+        session.flush()
+        for job_id in (_jobs_that_used(session, record, reads) if paths else []):
+            session.add(JobRetraction(job_id=job_id, retraction_id=log_row.id))
         session.delete(record)
         session.commit()
     store.remove(paths)
+    log.warning("retracted ingest %s (%s, %d files) by %s: %s", ingest_id, record.stream, len(paths),
+                retracted_by_name or retracted_by or "-", reason)
     return paths
+
+
+def retraction_of(session: Session, ingest_id: str) -> IngestRetraction | None:
+    """The log entry of the retraction of ``ingest_id`` (None if it was not retracted)."""
+    return session.scalar(select(IngestRetraction).where(IngestRetraction.ingest_id == ingest_id)
+                          .order_by(IngestRetraction.retracted_at.desc()).limit(1))
+
+
+def retracted_inputs(session: Session, job_ids: Iterable[str]) -> dict[str, list[IngestRetraction]]:
+    """job id -> the retractions of samples it had read (jobs without any are left out)."""
+    ids = list(job_ids)
+    if not ids:
+        return {}
+    out: dict[str, list[IngestRetraction]] = {}
+    rows = session.execute(select(JobRetraction.job_id, IngestRetraction).join(
+        IngestRetraction, IngestRetraction.id == JobRetraction.retraction_id).where(JobRetraction.job_id.in_(ids))
+        .order_by(IngestRetraction.retracted_at))
+    for job_id, retraction in rows:
+        out.setdefault(job_id, []).append(retraction)
+    return out
 
 
 def read_window(session: Session, store: ParquetStore, spacecraft_id: int, spec: StreamSpec,
@@ -149,6 +210,28 @@ def read_window(session: Session, store: ParquetStore, spacecraft_id: int, spec:
     if sensor is not None:
         table = table.filter(pa.compute.equal(table.column("sensor"), sensor))
     return _sort_unique(table, spec).select(list(empty_table(spec).schema.names))
+
+
+def read_series(session: Session, store: ParquetStore, spacecraft_id: int, spec: StreamSpec, sensor: str,
+                start_tai_ns: int | None = None, end_tai_ns: int | None = None) -> pa.Table:
+    """One sensor's stored samples in [start, end] sorted by time, for plotting a long window fast.
+
+    The same samples as :func:`read_window` with ``sensor``, ordered by time (then by the other key
+    columns, e.g. panels, in stored order) instead of by identity: a table already in time order (one
+    file, or files that follow each other, the usual case) is not sorted again."""
+    files = [f for f in _files_in_window(session, spacecraft_id, spec.name, start_tai_ns, end_tai_ns)
+             if sensor in f.sensors.split(",")]
+    tables = _read_files(session, store, sorted(files, key=lambda f: f.t_min_tai_ns), start_tai_ns, end_tai_ns)
+    if not tables:
+        return empty_table(spec)
+    table = pa.concat_tables(tables, promote_options="permissive")
+    if any(f.sensors != sensor for f in files):  # files of this sensor alone need no filtering
+        table = table.filter(pa.compute.equal(table.column("sensor"), sensor))
+    table = table.select(list(empty_table(spec).schema.names))
+    t = table.column(TIME_COLUMN).to_numpy()
+    if t.size > 1 and not bool(np.all(t[1:] >= t[:-1])):
+        table = table.take(pa.array(np.argsort(t, kind="stable")))
+    return table
 
 
 def arrow_schema(spec: StreamSpec) -> pa.Schema:

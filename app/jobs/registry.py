@@ -18,6 +18,8 @@ from processing.tasks import Progress, TaskInputs, TaskResult
 if TYPE_CHECKING:  # the job types import matplotlib when the registry is first read, not at start-up
     from matplotlib.figure import Figure
 
+    from app.reports.headline import Answer
+
 
 @dataclass(frozen=True)
 class JobType:
@@ -36,6 +38,9 @@ class JobType:
     applies_calibration: str | None = None  # the runner applies the pinned version to the inputs ("gyro")
     # extra report sections (app.reports.sections: ReportContext -> sequence of ReportSection)
     report_sections: Callable[[Any], Sequence[Any]] | None = None
+    # the summary keys that answer the job's question, shown first in its report (app.reports.headline);
+    # None: the generic rule (the quantities the specification judges, then numbers with a unit suffix)
+    headline: tuple[Answer, ...] | None = None
 
 
 _MODULES = ("coverage", "executor_check", "star_tracker_accuracy", "gyro_bias_fit", "orbital_attitude", "gyroless_ekf",

@@ -14,11 +14,13 @@ import numpy as np
 from numpy.typing import NDArray
 from sqlalchemy.orm import Session
 
+from app.reports.summary import iso
 from processing.screening.coverage import find_gaps
 from processing.streams import STREAMS
 from processing.units import NS_PER_S
+from storage.models import IngestRetraction
 from storage.parquet_store import ParquetStore
-from storage.telemetry import read_window
+from storage.telemetry import read_window, retracted_inputs
 
 GAP_FACTOR = 1.5
 MAX_LISTED_GAPS = 20
@@ -77,3 +79,18 @@ def describe_stored_window(session: Session, store: ParquetStore, spacecraft_id:
         if table.num_rows:
             columns[name] = {c: table.column(c).to_numpy(zero_copy_only=False) for c in ("time_tai_ns", "sensor")}
     return describe_inputs(columns, start_tai_ns, end_tai_ns)
+
+
+def describe_retraction(r: IngestRetraction) -> dict[str, Any]:
+    """A retracted ingest for reports, pages and the API (times as ISO 8601 UTC)."""
+    return {"retraction_id": r.id, "ingest_id": r.ingest_id, "stream": r.stream, "sensor": r.sensor,
+            "rows": r.rows, "samples_removed": r.inserted, "start": iso(r.start_tai_ns), "end": iso(r.end_tai_ns),
+            "filename": r.filename, "checksum_sha256": r.checksum_sha256, "files_removed": r.files_removed,
+            "reason": r.reason, "retracted_by": r.retracted_by_name or r.retracted_by,
+            "retracted_by_key": r.retracted_by, "retracted_at": r.retracted_at.isoformat(),
+            "uploaded_at": r.uploaded_at.isoformat()}
+
+
+def retracted_by_job(session: Session, job_ids: Iterable[str]) -> dict[str, list[dict[str, Any]]]:
+    """job id -> the retracted ingests whose samples it had read (jobs without any left out)."""
+    return {j: [describe_retraction(r) for r in rs] for j, rs in retracted_inputs(session, job_ids).items()}

@@ -13,6 +13,7 @@ import base64
 import io
 import json
 import urllib.parse
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -22,14 +23,15 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session, object_session
 
 from app.jobs.registry import JobType, registry
-from app.jobs.runner import stream_names
+from app.jobs.runner import CALIBRATION_PREFIX, SCREENING_KEY, stream_names
+from app.reports import headline as headlib
 from app.reports import specs as speclib
-from app.reports.inputs import describe_stored_window
+from app.reports.inputs import describe_stored_window, retracted_by_job
 from app.reports.pdf import html_to_pdf
 from app.reports.sections import ReportContext, as_cell, contributed_sections
-from app.reports.summary import iso, layout, wall
+from app.reports.summary import iso, layout, layouts, split_columns, wall
 from storage.jobs import ArtifactStore
-from storage.models import Job, ReferenceDataset, Spacecraft, SpacecraftConfig
+from storage.models import Calibration, Job, ReferenceDataset, Spacecraft, SpacecraftConfig
 from storage.parquet_store import ParquetStore
 
 _env = Environment(loader=FileSystemLoader(Path(__file__).parent / "templates"),
@@ -53,11 +55,22 @@ _env.filters["pretty_json"] = pretty_json
 
 
 def _reference_info(session: Session | None, chosen: dict[str, str]) -> dict[str, Any]:
+    """What each pinned input of the job is: reference data sets, the screening job, calibration versions."""
     info: dict[str, Any] = {}
-    for kind, dataset_id in chosen.items():
-        d = session.get(ReferenceDataset, dataset_id) if session is not None else None
-        info[kind] = {"id": dataset_id, "name": d.name if d else "(deleted)",
-                      "checksum_sha256": d.checksum_sha256 if d else None}
+    for kind, ref_id in chosen.items():
+        if kind == SCREENING_KEY:
+            j = session.get(Job, ref_id) if session is not None else None
+            info[kind] = {"id": ref_id, "name": f"data_screening job {ref_id[:8]} ({iso(j.start_tai_ns)} .. "
+                                              f"{iso(j.end_tai_ns)})" if j else "(deleted job)",
+                          "url": f"/ui/jobs/{ref_id}" if j else None, "checksum_sha256": None}
+        elif kind.startswith(CALIBRATION_PREFIX):
+            c = session.get(Calibration, ref_id) if session is not None else None
+            info[kind] = {"id": ref_id, "name": f"{c.kind} calibration version {c.version}" if c else "(deleted)",
+                          "url": f"/ui/jobs/{c.job_id}" if c and c.job_id else None, "checksum_sha256": None}
+        else:
+            d = session.get(ReferenceDataset, ref_id) if session is not None else None
+            info[kind] = {"id": ref_id, "name": d.name if d else "(deleted)", "url": None,
+                          "checksum_sha256": d.checksum_sha256 if d else None}
     return info
 
 
@@ -115,6 +128,52 @@ def _reproduce(job: Job, sc: Spacecraft, job_type: JobType | None, latest_versio
     return out
 
 
+def stage_headlines(summary: dict[str, Any] | None,
+                    specifications: speclib.Specifications | None) -> list[dict[str, Any]]:
+    """A pipeline's stages (``summary.stages.<job type>``), each with its own headline, checks and verdict.
+
+    The checks are returned under ``checks`` with keys and labels naming the stage (for the pipeline's
+    own specification table); an empty list for jobs that are not pipelines."""
+    stages = (summary or {}).get("stages")
+    if not isinstance(stages, dict):
+        return []
+    types = registry()
+    out = []
+    for name, stage in stages.items():
+        jt = types.get(name)
+        if not isinstance(stage, dict) or jt is None:
+            continue
+        stage_summary = stage.get("summary") if stage.get("status") == "succeeded" else None
+        checks = speclib.evaluate(name, stage_summary, specifications)
+        answers = jt.headline if jt.headline is not None else headlib.default_answers(stage_summary, checks)
+        out.append({"stage": name, "title": jt.title, "status": stage.get("status"),
+                    "reason": stage.get("reason") or stage.get("error"), "verdict": speclib.verdict(checks),
+                    "rows": headlib.rows(answers, stage_summary, checks),
+                    "checks": [replace(c, key=f"stages.{name}.summary.{c.key}", label=f"{name}: {c.label}")
+                               for c in checks]})
+    return out
+
+
+def brief(job: Job, job_type: JobType | None, specifications: speclib.Specifications | None) -> dict[str, Any]:
+    """The headline of a finished job in one line (for job lists): the first answer, all its components,
+    and the verdict of every answer."""
+    summary = (job.result or {}).get("summary") if job.status == "succeeded" else None
+    if not summary:
+        return {"text": "", "verdict": "none"}
+    checks = speclib.evaluate(job.type, summary, specifications)
+    stages = stage_headlines(summary, specifications)
+    checks += [c for st in stages for c in st.pop("checks")]
+    answers = job_type.headline if job_type is not None and job_type.headline is not None else \
+        headlib.default_answers(summary, checks)
+    rows = headlib.rows(answers, summary, checks) or [r for st in stages for r in st["rows"]]
+    if not rows:
+        return {"text": "", "verdict": speclib.verdict(checks)}
+    first = [r for r in rows if r["key"] == rows[0]["key"]]
+    values = ", ".join(r["text"] for r in first)
+    unit = f" {first[0]['unit']}" if first[0]["unit"] else ""
+    return {"text": f"{first[0]['quantity']}: {values}{unit}", "verdict": speclib.verdict(checks)}
+
+
 def report_json(job: Job, sc: Spacecraft, job_type: JobType | None, *,
                 telemetry: ParquetStore | None = None) -> dict[str, Any]:
     """The report as a JSON document (also the data the HTML and PDF are drawn from).
@@ -134,10 +193,18 @@ def report_json(job: Job, sc: Spacecraft, job_type: JobType | None, *,
             coverage = {"source": "store", "streams": describe_stored_window(
                 session, telemetry, sc.id, list(inputs), job.start_tai_ns, job.end_tai_ns)}
     specifications = speclib.parse(latest_config)
-    checks = speclib.evaluate(job.type, stored.get("summary"), specifications)
+    summary = stored.get("summary")
+    checks = speclib.evaluate(job.type, summary, specifications)
+    stages = stage_headlines(summary, specifications)
+    checks += [c for st in stages for c in st.pop("checks")]
     streams = sorted(set(inputs) | set(job_type.streams if job_type else ()))
-    return {
+    answers = job_type.headline if job_type is not None and job_type.headline is not None else \
+        headlib.default_answers(summary, checks)
+    return {  # the warnings and the answers first (a reader of the JSON sees them before anything else)
         "warnings": (stored.get("summary") or {}).get("warnings", []),
+        "headline": {"verdict": speclib.verdict(checks), "rows": headlib.rows(answers, summary, checks),
+                     "stages": stages},
+        "retracted_inputs": retracted_by_job(session, [job.id]).get(job.id, []) if session is not None else [],
         "job": {"id": job.id, "type": job.type, "title": job_type.title if job_type else job.type,
                 "paper": job_type.paper if job_type else "", "description": job_type.description if job_type else "",
                 "status": job.status, "error": job.error, "created_at": job.created_at.isoformat(),
@@ -153,7 +220,7 @@ def report_json(job: Job, sc: Spacecraft, job_type: JobType | None, *,
         "reference": _reference_info(session, job.reference or {}),
         "configuration": {"version": job.config_version, "config": config},
         "software_version": job.software_version,
-        "summary": stored.get("summary"),
+        "summary": summary,
         "notes": stored.get("notes", []),
         "specifications": {
             "configuration_version": latest_version if specifications is not None else None,
@@ -206,9 +273,12 @@ def _sections(data: dict[str, Any], job: Job, store: ArtifactStore, job_type: Jo
                 placed.add(f"{name}.png")
         for name, fig in s.figures.items():
             figs.append({"title": str(fig.get_label() or name), "data": base64.b64encode(_png(fig)).decode()})
-        out.append({"title": s.title, "paragraphs": list(s.paragraphs), "figures": figs,
-                    "tables": [{"title": t.title, "caption": t.caption, "columns": list(t.columns),
-                                "rows": [[as_cell(v) for v in r] for r in t.rows]} for t in s.tables]})
+        tables = []
+        for t in s.tables:
+            rows = [[as_cell(v) for v in r] for r in t.rows]
+            tables.append({"title": t.title, "caption": t.caption, "columns": list(t.columns), "rows": rows,
+                           "parts": split_columns([str(c) for c in t.columns], rows)})
+        out.append({"title": s.title, "paragraphs": list(s.paragraphs), "figures": figs, "tables": tables})
     return out, problems, placed
 
 
@@ -245,13 +315,18 @@ def render_html(data: dict[str, Any], job: Job, store: ArtifactStore, *, ui: boo
     figures = [{"name": name, "title": descriptions.get(name) or name, "data": base64.b64encode(png).decode()}
                for name, png in figure_files.items() if name not in placed]
     return _env.get_template("job_report.html").render(
-        d=data, summary=layout(data["summary"]), sections=sections, problems=problems, figures=figures,
+        d=data, summaries=layouts(data["summary"]), sections=sections, problems=problems, figures=figures,
         tables=_table_info(job, store), ui=ui, for_print=for_print, job_id=job.id)
 
 
 def _facts(data: dict[str, Any]) -> list[tuple[str, str]]:
     """Key facts of a report as text lines (for the PDF drawn without Chromium)."""
+    rows = data["headline"]["rows"] + [r for st in data["headline"]["stages"] for r in st["rows"]]
+    answers = [(f"{r['quantity']} {r['component']}".strip(),
+                " ".join(x for x in (r["text"], r["unit"], f"[{r['frame']}]" if r["frame"] else "", r["verdict"]) if x))
+               for r in rows]
     facts = [("Spacecraft", data["spacecraft"]), ("Job", f"{data['job']['id']} ({data['job']['status']})"),
+             *answers,
              ("Window (UTC)", f"{data['window']['start']} .. {data['window']['end']}"),
              ("Inputs", "; ".join(f"{s}: " + ", ".join(f"{k} {n}" for k, n in v.items())
                                   for s, v in data["inputs"].items()) or "none"),

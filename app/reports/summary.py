@@ -118,12 +118,66 @@ class Layout:
         return not (self.scalars or self.vectors or self.stats or self.tables)
 
 
+MAX_TABLE_CHARS = 110
+"""Widest table (in characters of its cells) shown as one piece; wider ones are split into parts that
+repeat the first column, so that a table fits an A4 page (and a laptop screen) without wrapped cells."""
+
+
+def split_columns(columns: list[str], rows: list[list[str]], max_chars: int = MAX_TABLE_CHARS,
+                  keep: int = 1) -> list[dict[str, Any]]:
+    """[{columns, rows}, ...]: the table in parts of at most ``max_chars`` characters wide, each part with
+    the first ``keep`` columns (the row names) in front."""
+    widths = [max([len(str(c))] + [len(str(r[i])) for r in rows if i < len(r)]) + 3 for i, c in enumerate(columns)]
+    head = list(range(min(keep, len(columns))))
+    base = sum(widths[i] for i in head)
+    parts: list[list[int]] = []
+    current: list[int] = []
+    used = base
+    for i in range(len(head), len(columns)):
+        if current and used + widths[i] > max_chars:
+            parts.append(current)
+            current, used = [], base
+        current.append(i)
+        used += widths[i]
+    if current or not parts:
+        parts.append(current)
+    return [{"columns": [columns[i] for i in head + part], "rows": [[r[i] for i in head + part] for r in rows]}
+            for part in parts]
+
+
+def _converted(name: str) -> tuple[str, float]:
+    """A record column's heading and factor: rad and rad/s shown in arcsec and deg/h."""
+    conv = _conversion(name)
+    return (conv[0], conv[1]) if conv is not None else (label(name), 1.0)
+
+
 def _records_table(name: str, records: list[Mapping[str, Any]]) -> dict[str, Any]:
+    """Records as a table; a record with per-axis vectors becomes one row per axis."""
+    shown = records[:MAX_RECORDS]
     columns: list[str] = []
-    for r in records[:MAX_RECORDS]:
+    for r in shown:
         columns += [c for c, v in r.items() if c not in columns and _is_scalar_like(v)]
-    rows = [[cell(c, r.get(c)) for c in columns] for r in records[:MAX_RECORDS]]
-    return {"name": name, "columns": [label(c) for c in columns], "rows": rows,
+    columns = [c for c in columns if not (c.endswith("_tai_ns") and c[: -len("_tai_ns")] in columns)]
+    vectors = [c for c in columns if any(_is_vector3(r.get(c)) for r in shown)]
+    scalars = [c for c in columns if c not in vectors]
+    headings = [label(c) for c in scalars]
+    rows: list[list[str]] = []
+    keep = 1
+    if not vectors:
+        rows = [[cell(c, r.get(c)) for c in scalars] for r in shown]
+    else:  # the first column and the axis lead every part of a split table
+        keep = min(2, len(scalars) + 1)
+        factors = [_converted(c) for c in vectors]
+        headings = headings[:1] + ["axis"] + headings[1:] + [h for h, _ in factors]
+        for r in shown:
+            for i, axis in enumerate(AXES):
+                row = [cell(c, r.get(c)) if i == 0 else "" for c in scalars]
+                row.insert(min(1, len(row)), axis)
+                for c, (_, f) in zip(vectors, factors, strict=True):
+                    v: Any = r.get(c)
+                    row.append(fmt(_scale(v[i], f)) if _is_vector3(v) else "—" if i else cell(c, v))
+                rows.append(row)
+    return {"name": name, "columns": headings, "rows": rows, "parts": split_columns(headings, rows, keep=keep),
             "truncated": len(records) > MAX_RECORDS, "total": len(records)}
 
 
@@ -132,8 +186,9 @@ def _keyed_table(name: str, value: Mapping[str, Mapping[str, Any]]) -> dict[str,
     for inner in value.values():
         columns += [c for c in inner if c not in columns]
     rows = [[str(k)] + [cell(c, inner.get(c)) for c in columns] for k, inner in value.items()]
-    return {"name": name, "columns": ["", *[label(c) for c in columns]], "rows": rows, "truncated": False,
-            "total": len(rows)}
+    headings = ["", *[label(c) for c in columns]]
+    return {"name": name, "columns": headings, "rows": rows, "parts": split_columns(headings, rows),
+            "truncated": False, "total": len(rows)}
 
 
 def layout(summary: Mapping[str, Any] | None) -> Layout:
@@ -143,6 +198,22 @@ def layout(summary: Mapping[str, Any] | None) -> Layout:
         out.axes = axis_names(summary)
         _walk(summary, "", out)
     return out
+
+
+def layouts(summary: Mapping[str, Any] | None) -> list[tuple[str, Layout]]:
+    """The summary laid out, a pipeline's stages (``stages.<name>``) each on its own."""
+    if not summary:
+        return []
+    stages = summary.get("stages")
+    if not isinstance(stages, Mapping) or not all(isinstance(v, Mapping) for v in stages.values()):
+        lay = layout(summary)
+        return [] if lay.empty else [("", lay)]
+    out = [("Pipeline", layout({k: v for k, v in summary.items() if k != "stages"}))]
+    for name, stage in stages.items():
+        inner = stage.get("summary")
+        rest = {k: v for k, v in stage.items() if k != "summary"}
+        out.append((f"Stage {name}", layout({**rest, **(inner if isinstance(inner, Mapping) else {})})))
+    return [(t, lay) for t, lay in out if not lay.empty]
 
 
 def axis_names(summary: Mapping[str, Any]) -> tuple[str, str, str]:

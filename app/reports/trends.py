@@ -12,7 +12,7 @@ import base64
 import io
 import math
 from collections.abc import Callable, Iterable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -46,6 +46,7 @@ class Metric:
     scale: float = 1.0
     components: tuple[str, ...] = ("x", "y", "z")
     stats: tuple[str, ...] = ()
+    sigma: str | None = None  # summary key of the 1-sigma of each component (error bars), same scale
     limits: Callable[[Specifications], list[tuple[float | None, float | None]] | None] = field(
         default=lambda specs: None, repr=False)
 
@@ -68,10 +69,11 @@ KEY_METRICS: tuple[Metric, ...] = (
     Metric("star_tracker_accuracy", "sigma_arcsec", "Star-tracker accuracy σ per sensor axis", "arcsec",
            limits=lambda s: _per_axis(s.star_tracker_sigma_arcsec, symmetric=False)),
     Metric("gyro_bias_fit", "gyro_bias_rad_s", "Gyro offsets (bias, body axes)", "deg/h", DEG_H_PER_RAD_S,
-           limits=lambda s: _per_axis(s.gyro_bias_max_deg_h, symmetric=True)),
+           sigma="gyro_bias_sigma_rad_s", limits=lambda s: _per_axis(s.gyro_bias_max_deg_h, symmetric=True)),
     Metric("alignment_calibration", "misalignment_rad", "Gyro-to-star-tracker misalignment (rotation vector)",
-           "arcsec", ARCSEC_PER_RAD),
+           "arcsec", ARCSEC_PER_RAD, sigma="misalignment_sigma_rad"),
     Metric("alignment_calibration", "scale_factor_error", "Gyro scale-factor error", "ppm", PPM,
+           sigma="scale_factor_error_sigma",
            limits=lambda s: None if s.scale_factor_error_max_ppm is None else
            [(-s.scale_factor_error_max_ppm, s.scale_factor_error_max_ppm)] * 3),
     Metric("alignment_calibration", "drift_rad_s", "Gyro drift (alignment calibration)", "deg/h", DEG_H_PER_RAD_S,
@@ -90,6 +92,7 @@ class Point:
     window_start_tai_ns: int
     window_end_tai_ns: int
     values: tuple[float | None, ...]
+    sigmas: tuple[float | None, ...] | None = None  # 1-sigma per component, when the job reports one
 
     @property
     def mid_tai_ns(self) -> int:
@@ -150,6 +153,7 @@ def generic_metrics(job_type: str, jobs: Sequence[Job]) -> list[Metric]:
             for key, values in flatten_numbers((job.result or {}).get("summary") or {}).items():
                 shapes.setdefault(key, len(values))
     out = []
+    sigma_keys = {k for k in (_sigma_key(shapes, key) for key in shapes) if k}
     for key, n in shapes.items():
         scale, unit, title = 1.0, "", key
         for suffix, u, f in (("_rad_s", "deg/h", DEG_H_PER_RAD_S), ("_rad", "arcsec", ARCSEC_PER_RAD)):
@@ -157,9 +161,22 @@ def generic_metrics(job_type: str, jobs: Sequence[Job]) -> list[Metric]:
                 scale, unit, title = f, u, f"{key[: -len(suffix)]}"
                 break
         comps = ("x", "y", "z") if n == 3 else tuple(str(i + 1) for i in range(n)) if n > 1 else ("",)
-        out.append(Metric(job_type, key, title, unit, scale, components=comps,
+        sigma = _sigma_key(shapes, key)
+        if key in sigma_keys:
+            continue
+        out.append(Metric(job_type, key, title, unit, scale, components=comps, sigma=sigma,
                           limits=_generic_limits(job_type, key, scale, n)))
     return out
+
+
+def _sigma_key(keys: Iterable[str], key: str) -> str | None:
+    """The key of ``key``'s 1-sigma among ``keys`` (``gyro_bias_rad_s`` -> ``gyro_bias_sigma_rad_s``,
+    ``scale_factor_error`` -> ``scale_factor_error_sigma``)."""
+    present = set(keys)
+    for suffix in ("_rad_s", "_rad", "_arcsec_s", "_arcsec", "_deg_s", "_deg", "_m_s", "_m", "_s"):
+        if key.endswith(suffix) and f"{key[: -len(suffix)]}_sigma{suffix}" in present:
+            return f"{key[: -len(suffix)]}_sigma{suffix}"
+    return f"{key}_sigma" if f"{key}_sigma" in present else None
 
 
 def _generic_limits(job_type: str, key: str, scale: float,
@@ -188,9 +205,13 @@ def trends(jobs: Sequence[Job], metrics: Sequence[Metric], specs: Specifications
         for job in jobs:
             if job.type != metric.job_type:
                 continue
-            values = _values(metric, (job.result or {}).get("summary") or {})
+            summary = (job.result or {}).get("summary") or {}
+            values = _values(metric, summary)
             if values is not None:
-                points.append(Point(job.id, job.type, _series(job), job.start_tai_ns, job.end_tai_ns, values))
+                sigmas = _values(replace(metric, key=metric.sigma, stats=()), summary) if metric.sigma else None
+                if sigmas is not None and len(sigmas) != len(values):
+                    sigmas = None
+                points.append(Point(job.id, job.type, _series(job), job.start_tai_ns, job.end_tai_ns, values, sigmas))
         if points:
             out.append(Trend(metric, tuple(points), metric.limits(specs) if specs is not None else None))
     return out
@@ -201,12 +222,41 @@ def _dates(tai_ns: Sequence[int]) -> np.ndarray:
         "datetime64[ns]")
 
 
+ANGLE_WORDS = ("pitch", "yaw", "roll")
+
+
+def _is_angle(metric: Metric) -> bool:
+    """Attitude angles in degrees wrap at +-180: their trends are drawn unwrapped."""
+    return metric.unit == "deg" and any(w in metric.key for w in ANGLE_WORDS)
+
+
+def _continuous(y: np.ndarray) -> np.ndarray:
+    ok = np.isfinite(y)
+    if ok.sum() > 1:
+        y = y.copy()
+        y[ok] = np.rad2deg(np.unwrap(np.deg2rad(y[ok])))
+        y[ok] -= 360.0 * np.round(np.nanmean(y[ok]) / 360.0)
+    return y
+
+
+def _date_axis(ax: Any, lo: np.datetime64, hi: np.datetime64) -> None:
+    """Full dates on the time axis (year, month, day; the time of day when the span is short)."""
+    from matplotlib import dates as mdates
+
+    span_days = float((hi - lo) / np.timedelta64(1, "D"))
+    locator = mdates.AutoDateLocator(minticks=3, maxticks=8)
+    ax.xaxis.set_major_locator(locator)
+    ax.xaxis.set_major_formatter(mdates.DateFormatter("%Y-%m-%d %H:%M" if span_days < 3 else "%Y-%m-%d"))
+    ax.set_xlabel("middle of each job's window (UTC)")
+
+
 def figure(trend: Trend) -> Figure:
-    """One trend: a line per component (and sensor), dashed red lines at the specification limits."""
+    """One trend: a line per component (and sensor) with ±1σ error bars where the jobs report them,
+    dashed lines at the specification limits, full dates on the time axis."""
     m = trend.metric
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(9, 3.2), label=m.title)
+    fig = Figure(figsize=(9, 3.4), label=m.title, layout="constrained")
     ax = fig.add_subplot()
     series = sorted({p.series for p in trend.points})
     colors = ("tab:blue", "tab:orange", "tab:green", "tab:purple", "tab:brown", "tab:pink")
@@ -217,10 +267,18 @@ def figure(trend: Trend) -> Figure:
         x = _dates([p.mid_tai_ns for p in pts])
         for c in range(n_comp):
             y = np.array([p.values[c] if c < len(p.values) and p.values[c] is not None else np.nan for p in pts])
+            if _is_angle(m):
+                y = _continuous(y)
+            err = np.array([p.sigmas[c] if p.sigmas is not None and c < len(p.sigmas) and p.sigmas[c] is not None
+                            else np.nan for p in pts])
             comp = m.components[c] if c < len(m.components) else str(c + 1)
             tag = " ".join(t for t in (name, comp) if t)
-            ax.plot(x, y, marker=markers[si % len(markers)], color=colors[c % len(colors)], linewidth=1,
-                    markersize=4, label=tag or m.key)
+            style: dict[str, Any] = {"marker": markers[si % len(markers)], "color": colors[c % len(colors)],
+                                     "linewidth": 1, "markersize": 4, "label": tag or m.key}
+            if np.isfinite(err).any():
+                ax.errorbar(x, y, yerr=np.where(np.isfinite(err), err, 0.0), capsize=3, elinewidth=0.8, **style)
+            else:
+                ax.plot(x, y, **style)
     if trend.limits:
         drawn: set[float] = set()
         per_axis = len(set(trend.limits[:n_comp])) > 1
@@ -234,11 +292,15 @@ def figure(trend: Trend) -> Figure:
     lo_x, hi_x = x.min(), x.max()
     pad = max((hi_x - lo_x) * 0.05, np.timedelta64(1, "h"))
     ax.set_xlim(lo_x - pad, hi_x + pad)
-    ax.set_ylabel(m.unit or m.key)
-    ax.set_title(m.title)
+    _date_axis(ax, lo_x - pad, hi_x + pad)
+    has_sigma = any(p.sigmas is not None for p in trend.points)
+    ax.set_ylabel((m.unit or m.key) + (" (±1σ)" if has_sigma else ""))
+    ax.set_title(m.title + (" — unwrapped at ±180°" if _is_angle(m) else ""))
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8, loc="upper left", ncols=min(7, n_comp * len(series) + 1))
-    fig.autofmt_xdate()
+    for label in ax.get_xticklabels():
+        label.set_rotation(20)
+        label.set_horizontalalignment("right")
     return fig
 
 
@@ -254,8 +316,10 @@ def rows(trend_list: Sequence[Trend]) -> list[dict[str, Any]]:
     for t in trend_list:
         for p in t.points:
             for c, v in enumerate(p.values):
+                sigma = p.sigmas[c] if p.sigmas is not None and c < len(p.sigmas) else None
                 out.append({"job_id": p.job_id, "job_type": p.job_type, "series": p.series,
                             "window_start": iso(p.window_start_tai_ns), "window_end": iso(p.window_end_tai_ns),
                             "metric": t.metric.key, "component": t.metric.components[c]
-                            if c < len(t.metric.components) else str(c + 1), "value": v, "unit": t.metric.unit})
+                            if c < len(t.metric.components) else str(c + 1), "value": v, "unit": t.metric.unit,
+                            "sigma": sigma})
     return out

@@ -15,12 +15,15 @@ from sqlalchemy.orm import Session
 
 from app.jobs.registry import JobType, registry
 from app.jobs.runner import CALIBRATION_PREFIX, SCREENING_KEY, stream_names
-from app.reports.job_report import report_json
+from app.reports.inputs import retracted_by_job
+from app.reports.job_report import brief, report_json
+from app.reports.specs import parse as parse_specs
 from app.services.access import Principal
 from app.services.downloads import StoredFile
 from app.services.errors import Conflict, Gone, Invalid, NotFound
 from app.services.pages import Page, page_of, paginate
 from app.services.spacecraft import get_spacecraft, latest_config
+from app.services.suggest import did_you_mean, field_errors
 from app.services.times import iso
 from app.settings import Settings
 from app.version import __version__
@@ -29,6 +32,7 @@ from storage import calibrations
 from storage import jobs as jobstore
 from storage.jobs import ArtifactStore
 from storage.models import Artifact, Calibration, Job, ReferenceDataset, Spacecraft, TelemetryFile
+from storage.models import SpacecraftConfig as ConfigRow
 from storage.parquet_store import ParquetStore
 from storage.reference import latest_covering
 
@@ -81,7 +85,7 @@ def get_job_type(name: str) -> JobType:
     jobs = registry()
     jt = jobs.get(name)
     if jt is None:
-        raise Invalid(f"unknown job type {name!r}; types: {', '.join(sorted(jobs))}")
+        raise Invalid(f"unknown job type {name!r}{did_you_mean(name, jobs)}; types: {', '.join(sorted(jobs))}")
     return jt
 
 
@@ -90,8 +94,7 @@ def validated_params(jt: JobType, params: dict[str, Any]) -> BaseModel:
     try:
         return jt.params.model_validate(params)
     except ValidationError as exc:
-        errors = [{"row": None, "column": "params." + ".".join(str(p) for p in e["loc"]), "message": e["msg"]}
-                  for e in exc.errors()]
+        errors = field_errors(exc, jt.params, prefix="params.")
         raise Invalid({"message": f"invalid params for {jt.name}", "errors": errors}) from None
 
 
@@ -280,6 +283,44 @@ def artifact_file(session: Session, settings: Settings, job_id: str, name: str, 
     if not path.is_file():
         raise Gone(f"artifact {name!r} of job {job_id} is missing on disk")
     return StoredFile(path, art.media_type, art.name)
+
+
+@dataclass(frozen=True)
+class Brief:
+    """A job in a list: its headline in one line, the verdict, how long it ran, retracted inputs."""
+
+    text: str
+    verdict: str
+    duration: str
+    retracted: bool
+
+
+def _duration(job: Job) -> str:
+    if job.started_at is None:
+        return ""
+    end = job.finished_at or dt.datetime.now(dt.UTC)
+    s = max(0.0, (end - job.started_at).total_seconds())
+    if s < 60:
+        return f"{s:.1f} s"
+    if s < 3600:
+        return f"{int(s // 60)} min {int(s % 60)} s"
+    return f"{int(s // 3600)} h {int(s % 3600 // 60)} min"
+
+
+def briefs(session: Session, listed: list[tuple[Job, str]]) -> dict[str, Brief]:
+    """job id -> Brief for jobs listed with their spacecraft names (specifications read once per spacecraft)."""
+    types = registry()
+    specs: dict[int, Any] = {}
+    retracted = retracted_by_job(session, [j.id for j, _ in listed])
+    out = {}
+    for job, _name in listed:
+        if job.spacecraft_id not in specs:
+            row = session.scalar(select(ConfigRow.config).where(ConfigRow.spacecraft_id == job.spacecraft_id)
+                                 .order_by(ConfigRow.version.desc()).limit(1))
+            specs[job.spacecraft_id] = parse_specs(row)
+        b = brief(job, types.get(job.type), specs[job.spacecraft_id])
+        out[job.id] = Brief(b["text"], b["verdict"], _duration(job), job.id in retracted)
+    return out
 
 
 def report(session: Session, job_id: str, who: Principal, telemetry: ParquetStore | None = None) -> JobReport:

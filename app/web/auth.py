@@ -72,6 +72,7 @@ def require(role: str) -> Callable[[Request], Principal]:
 
 WebViewer = Annotated[Principal, Depends(require("viewer"))]
 WebOperator = Annotated[Principal, Depends(require("operator"))]
+WebAdmin = Annotated[Principal, Depends(require("admin"))]
 
 
 def csrf_token(secret: str) -> str:

@@ -9,9 +9,10 @@ from __future__ import annotations
 import dataclasses
 import json
 import urllib.parse
+from collections.abc import Mapping
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Form, HTTPException, Query, Request
+from fastapi import APIRouter, Depends, Form, HTTPException, Query, Request
 from fastapi.responses import FileResponse, HTMLResponse, JSONResponse, RedirectResponse, Response
 from pydantic import ValidationError
 
@@ -23,6 +24,7 @@ from app.services import jobs
 from app.services.errors import ServiceError
 from app.services.jobs import JobCreate
 from app.services.spacecraft import visible_spacecraft
+from app.web import params_form
 from app.web.auth import WebOperator, WebViewer, check_form, current_principal
 from app.web.render import NO_STORE, HtmlRoute, page
 from app.web.routes import TIME_SCALES
@@ -41,7 +43,9 @@ def job_list(request: Request, session: SessionDep, who: WebViewer, spacecraft: 
     if wanted_status is not None and wanted_status not in STATUSES:
         raise HTTPException(422, f"status must be one of {', '.join(STATUSES)}")
     listed = jobs.list_jobs(session, who, spacecraft or None, type or None, wanted_status, None, MAX_LISTED)
-    return page(request, "jobs.html", jobs=[(j, s.name) for j, s in listed.items], more=listed.next_cursor is not None,
+    shown = [(j, s.name) for j, s in listed.items]
+    return page(request, "jobs.html", jobs=shown, briefs=jobs.briefs(session, shown),
+                more=listed.next_cursor is not None,
                 spacecraft_names=[s.name for s in visible_spacecraft(session, who)],
                 types=sorted(j.name for j in jobs.job_types()), statuses=STATUSES,
                 selected={"spacecraft": spacecraft or "", "type": type or "", "status": wanted_status or ""})
@@ -66,10 +70,13 @@ def _form_defaults(request: Request) -> dict[str, str]:
 
 
 def _new_form(request: Request, session: Any, who: Any, values: dict[str, str], status_code: int = 200,
-              error: str | None = None, errors: list[Any] | None = None) -> HTMLResponse:
+              error: str | None = None, errors: list[Any] | None = None,
+              typed: Mapping[str, Any] | None = None) -> HTMLResponse:
     types = sorted(jobs.job_types(), key=lambda j: j.name)
-    schemas = {j.name: j.params.model_json_schema().get("properties", {}) for j in types}
-    return page(request, "job_new.html", status_code=status_code, values=values, types=types, schemas=schemas,
+    form_fields = {j.name: params_form.fields(j.params) for j in types}
+    by_field = {str(e.get("column") or ""): str(e.get("message")) for e in errors or []}
+    return page(request, "job_new.html", status_code=status_code, values=values, types=types,
+                form_fields=form_fields, typed=typed or {}, field_errors=by_field,
                 spacecraft_names=[s.name for s in visible_spacecraft(session, who)], time_scales=TIME_SCALES,
                 error=error, errors=errors or [])
 
@@ -79,35 +86,50 @@ def new_job(request: Request, session: SessionDep, who: WebOperator) -> HTMLResp
     return _new_form(request, session, who, _form_defaults(request))
 
 
+async def _form(request: Request) -> Mapping[str, Any]:
+    """Every field of the submitted form (the typed parameter fields have names of their job type)."""
+    return await request.form()
+
+
 @router.post("")
 def submit_job(request: Request, session: SessionDep, who: WebOperator, type: Annotated[str, Form()],
-               spacecraft: Annotated[str, Form()], csrf: Annotated[str | None, Form()] = None,
+               spacecraft: Annotated[str, Form()], form: Annotated[Mapping[str, Any], Depends(_form)],
+               csrf: Annotated[str | None, Form()] = None,
                start: Annotated[str, Form()] = "", end: Annotated[str, Form()] = "",
                time_scale: Annotated[str, Form()] = "utc", params: Annotated[str, Form()] = "{}",
                reference: Annotated[str, Form()] = "") -> Response:
     check_form(request, csrf)
     values = {"type": type, "spacecraft": spacecraft, "start": start, "end": end, "time_scale": time_scale,
               "params": params, "reference": reference}
+    jt = next((j for j in jobs.job_types() if j.name == type), None)
+    typed = {k: str(v) for k, v in form.items() if k.startswith(params_form.PREFIX)}
+    from_fields, field_problems = params_form.read(jt.params, jt.name, form) if jt is not None else ({}, [])
+    if field_problems:
+        return _new_form(request, session, who, values, 422, "some parameters could not be read", field_problems,
+                         typed)
     try:
         parsed_params = json.loads(params or "{}")
         parsed_reference = json.loads(reference) if reference.strip() else {}
         if not isinstance(parsed_params, dict) or not isinstance(parsed_reference, dict):
             raise ValueError("must be a JSON object")
     except ValueError as exc:
-        return _new_form(request, session, who, values, 422, f"parameters and reference must be JSON objects: {exc}")
+        return _new_form(request, session, who, values, 422, f"parameters and reference must be JSON objects: {exc}",
+                         typed=typed)
+    parsed_params = {**from_fields, **parsed_params}  # the JSON area overrides the typed fields
     try:
         body = JobCreate(type=type, spacecraft=spacecraft, start=start.strip() or None, end=end.strip() or None,
                          time_scale=time_scale, params=parsed_params, reference=parsed_reference)
         job = jobs.submit(session, body, who, on_submit=request.app.state.executor.wake)
     except ValidationError as exc:
         return _new_form(request, session, who, values, 422, "invalid job request",
-                         [{"column": ".".join(str(p) for p in e["loc"]), "message": e["msg"]} for e in exc.errors()])
+                         [{"column": ".".join(str(p) for p in e["loc"]), "message": e["msg"]} for e in exc.errors()],
+                         typed)
     except ServiceError as exc:
         detail = exc.detail
         if isinstance(detail, dict):
             return _new_form(request, session, who, values, http_status(exc), str(detail.get("message")),
-                             detail.get("errors"))
-        return _new_form(request, session, who, values, http_status(exc), str(detail))
+                             detail.get("errors"), typed)
+        return _new_form(request, session, who, values, http_status(exc), str(detail), typed=typed)
     return RedirectResponse(f"/ui/jobs/{job.id}", status_code=303)
 
 

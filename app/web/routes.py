@@ -23,7 +23,7 @@ from app.api.files import download_response
 from app.ingest.errors import UploadError
 from app.reports import specs as speclib
 from app.reports import trends as trendlib
-from app.services import coverage, jobs, telemetry, trends
+from app.services import coverage, ingests, jobs, telemetry, trends
 from app.services.downloads import table_download
 from app.services.errors import Unsupported
 from app.services.spacecraft import get_spacecraft, latest_config, overview
@@ -45,7 +45,8 @@ from storage.telemetry import ConflictError, IngestMeta
 router = APIRouter(prefix="/ui", route_class=HtmlRoute, include_in_schema=False)
 root_router = APIRouter(include_in_schema=False)
 
-STATIC_FILES = {"app.css": "text/css; charset=utf-8", "app.js": "text/javascript; charset=utf-8"}
+STATIC_FILES = {"app.css": "text/css; charset=utf-8", "app.js": "text/javascript; charset=utf-8",
+                "viewer.js": "text/javascript; charset=utf-8", "forms.js": "text/javascript; charset=utf-8"}
 EXTENSION_TYPES = {".csv": "text/csv", ".parquet": "application/vnd.apache.parquet",
                    ".pq": "application/vnd.apache.parquet", ".arrow": "application/vnd.apache.arrow.stream",
                    ".arrows": "application/vnd.apache.arrow.stream", ".json": "application/json"}
@@ -116,17 +117,25 @@ def parse_time(value: str | None, field: str) -> int | None:
 
 @router.get("/spacecraft/{name}")
 def spacecraft_page(request: Request, name: str, session: SessionDep, who: WebViewer, start: str | None = None,
-                    end: str | None = None, uploaded: str | None = None) -> HTMLResponse:
+                    end: str | None = None, uploaded: str | None = None, retracted: str | None = None,
+                    created: str | None = None, config_version: int | None = None) -> HTMLResponse:
     sc = get_spacecraft(session, name, who)
     cfg = latest_config(session, sc)
     t0, t1 = parse_time(start, "start"), parse_time(end, "end")
     if t0 is not None and t1 is not None and t1 <= t0:
         raise HTTPException(422, "end must be after start")
     tl = coverage.build(session, sc.id, t0, t1)
+    retractions = ingests.retractions(session, name, who, 20)
+    recent = [(j, sc.name) for j in jobs.recent_jobs(session, sc, 20)]
+    is_admin = who.role == "admin"
     return page(request, "spacecraft.html", sc=sc, config=cfg, specs=speclib.parse(cfg.config), timeline=tl,
+                retractions=retractions, retracted=next((r for r in retractions if r.id == retracted), None),
+                marked={r.id: ingests.marked_jobs(session, r) for r in retractions},
+                quarantined=ingests.quarantined(session, name, who) if is_admin else [], is_admin=is_admin,
+                created=bool(created), saved_version=config_version,
                 geometry=timeline.geometry(tl) if tl is not None else None,
                 ingests=telemetry.recent_ingests(session, sc, 20),
-                jobs=[(j, sc.name) for j in jobs.recent_jobs(session, sc, 20)], streams=list(STREAMS),
+                jobs=recent, briefs=jobs.briefs(session, recent), streams=list(STREAMS),
                 formats=sorted(d.name for d in telemetry.list_formats()), time_scales=TIME_SCALES,
                 view_start=start or "", view_end=end or "",
                 uploaded=telemetry.find_ingest(session, sc, uploaded) if uploaded else None,
@@ -206,7 +215,8 @@ def trends_csv(name: str, session: SessionDep, who: WebViewer, type: str | None 
                end: str | None = None) -> Response:
     sel = trends.select_trends(session, name, who, type or None, _stripped(start), _stripped(end))
     buf = io.StringIO()
-    fields = ["job_id", "job_type", "series", "window_start", "window_end", "metric", "component", "value", "unit"]
+    fields = ["job_id", "job_type", "series", "window_start", "window_end", "metric", "component", "value", "unit",
+              "sigma"]
     writer = csv.DictWriter(buf, fieldnames=fields, lineterminator="\n")
     writer.writeheader()
     writer.writerows(trendlib.rows(sel.trends))

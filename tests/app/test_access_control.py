@@ -28,6 +28,10 @@ ACCESS: dict[tuple[str, str], tuple[str, str]] = {
     ("POST", "/api/v1/spacecraft/{name}/telemetry/{stream}"): ("operator", "spacecraft"),
     ("GET", "/api/v1/spacecraft/{name}/telemetry/{stream}"): ("viewer", "spacecraft"),
     ("GET", "/api/v1/spacecraft/{name}/ingests"): ("viewer", "spacecraft"),
+    ("DELETE", "/api/v1/spacecraft/{name}/ingests/{ingest_id}"): ("operator", "spacecraft"),
+    ("GET", "/api/v1/spacecraft/{name}/retractions"): ("viewer", "spacecraft"),
+    ("GET", "/api/v1/spacecraft/{name}/quarantine"): ("admin", "spacecraft"),
+    ("POST", "/api/v1/spacecraft/{name}/quarantine/{file_id}/restore"): ("admin", "spacecraft"),
     ("GET", "/api/v1/spacecraft/{name}/calibrations"): ("viewer", "spacecraft"),
     ("GET", "/api/v1/spacecraft/{name}/export/oem"): ("viewer", "spacecraft"),
     ("GET", "/api/v1/formats"): ("viewer", "global"),
@@ -76,22 +80,25 @@ def app_routes(client) -> list[tuple[str, str]]:
 @pytest.fixture
 def world(client):
     """Spacecraft A and B with telemetry and a finished job each, and keys of every kind."""
+    ingests = {}
     for sc in ("A", "B"):
         make_spacecraft(client, sc, {"star_trackers": {"st1": {"q_BS": [1, 0, 0, 0]}}})
-        upload(client, "gyro", "time,wx,wy,wz\n2023-06-01T00:00:00Z,1,2,3\n2023-06-01T00:00:01Z,1,2,3\n", sc=sc)
+        r = upload(client, "gyro", "time,wx,wy,wz\n2023-06-01T00:00:00Z,1,2,3\n2023-06-01T00:00:01Z,1,2,3\n", sc=sc)
+        ingests[sc] = r.json()["ingest_id"]
         upload(client, "gnss", "time,x,y,z,vx,vy,vz\n2023-06-01T00:00:00Z,7000000,0,0,0,7500,0\n"
                                "2023-06-01T00:00:01Z,6999996,7500,0,-8,7500,0\n", sc=sc)
     jobs = run_coverage_jobs(client, ("A", "B"))
     keys, key = issue_keys(client, revoked_role="admin")
     keys["expired"] = key("admin", expires_at="2001-01-01T00:00:00Z")["secret"]
-    return {"jobs": jobs, "keys": keys}
+    return {"jobs": jobs, "keys": keys, "ingests": ingests}
 
 
 def fill(path: str, sc: str, world) -> str:
     return (path.replace("{name}/telemetry", f"{sc}/telemetry").replace("spacecraft/{name}", f"spacecraft/{sc}")
             .replace("{stream}", "gyro").replace("{job_id}", world["jobs"][sc])
             .replace("artifacts/{name}", "artifacts/summary.json").replace("{key_id}", "nosuch")
-            .replace("{kind}", "nosuch").replace("{dataset_id}", "nosuch"))
+            .replace("{kind}", "nosuch").replace("{dataset_id}", "nosuch").replace("{file_id}", "999999")
+            .replace("{ingest_id}", world["ingests"][sc] + "?reason=access%20check"))
 
 
 def call(client, method, path, secret, sc="A"):

@@ -28,6 +28,7 @@ from app.jobs.runner import stream_names
 from app.main import create_app
 from app.reports import job_report, sections, specs, summary, trends
 from app.settings import Settings
+from tests.app.figure_geometry import problems as figure_problems
 from tests.app.report_world import (
     SPACECRAFT,
     SPECIFICATIONS,
@@ -68,7 +69,7 @@ def world(tmp_path_factory: pytest.TempPathFactory):
             ids[name] = r.json()["id"]
         jobs = {name: wait(client, job_id, timeout_s=900) for name, job_id in ids.items()}
         yield types.SimpleNamespace(client=client, jobs=jobs, skipped=skipped, sim=worlds[SPACECRAFT],
-                                    where=where, settings=settings)
+                                    where=where, settings=settings, worlds=worlds)
     lines = [f"{k:<28} " + "  ".join(f"{m} {v:6.2f} s" for m, v in sorted(t.items()))
              for k, t in sorted(TIMINGS.items())]
     (output_dir("reports") / "timings.txt").write_text("\n".join(lines) + "\n")
@@ -76,7 +77,7 @@ def world(tmp_path_factory: pytest.TempPathFactory):
 
 @pytest.fixture(scope="module")
 def pdf_tools() -> None:
-    reason = missing_tools({"chromium": "chromium", "pdftoppm": "poppler-utils"})
+    reason = missing_tools({"chromium": "chromium", "pdftoppm": "poppler-utils", "pdftotext": "poppler-utils"})
     if reason:
         pytest.skip(reason)
 
@@ -161,6 +162,16 @@ def test_pdf_report_pages_are_not_blank(world, pdf_tools, job_type):
     assert pages
     for page in pages:
         assert png_ink_fraction(page) > BLANK, f"{page.name} is blank"
+    # page 1 holds the headline table: the job's answers, before anything else
+    pdf_path = output_dir("reports") / f"{job_type}.pdf"
+    first = subprocess.run(["pdftotext", "-f", "1", "-l", "1", "-layout", str(pdf_path), "-"], check=True,
+                           capture_output=True, text=True, timeout=60).stdout
+    rep = world.client.get(f"/api/v1/jobs/{job['id']}/report", params={"format": "json"}).json()
+    rows = rep["headline"]["rows"] + [r for st in rep["headline"]["stages"] for r in st["rows"]]
+    assert rows, "no headline"
+    assert "Result" in first and "Value ± 1σ" in first
+    for row in rows:
+        assert row["text"] in first, (row, first)
 
 
 def test_pdf_without_chromium_is_drawn_by_matplotlib(world, monkeypatch):
@@ -219,6 +230,44 @@ def test_json_report_says_what_was_processed_and_judges_the_specification(world)
     assert rep["window"]["start"] == job["start"] and rep["parameters"] == job["params"]
     html = world.client.get(f"/api/v1/jobs/{job['id']}/report").text
     assert 'id="verdict">FAIL<' in html and "gaps in the window" in html
+
+
+@pytest.mark.parametrize("job_type", all_type_names())
+def test_headline_first_with_units_frames_and_verdicts(world, job_type):
+    job = finished(world, job_type)
+    rep = world.client.get(f"/api/v1/jobs/{job['id']}/report", params={"format": "json"}).json()
+    headline = rep["headline"]
+    rows = headline["rows"] + [r for st in headline["stages"] for r in st["rows"]]
+    assert rows
+    for r in rows:
+        assert set(r) >= {"quantity", "component", "value", "sigma", "unit", "frame", "verdict", "text"}
+        assert r["verdict"] in ("PASS", "FAIL", "UNDETERMINED", "")
+        if r["component"] in ("x", "y", "z", "x1", "x2", "x3"):  # a vector: its frame is named
+            assert r["frame"], r
+    assert headline["verdict"] == rep["specifications"]["verdict"]
+    html = world.client.get(f"/api/v1/jobs/{job['id']}/report").text
+    order = [html.find(marker) for marker in ('id="headline"', 'id="figures"', '<h2 id="processed">',
+                                              '<h2 id="parameters">', '<h2 id="summary">')]
+    present = [i for i in order if i >= 0]
+    assert order[0] >= 0 and present == sorted(present), order  # answers, figures, then the collapsed rest
+    assert '<details class="section"><summary><h2 id="processed">' in html  # collapsed in the HTML
+    if job_type == "gyro_bias_fit":
+        bias = [r for r in rows if r["key"] == "gyro_bias_rad_s"]
+        assert [r["component"] for r in bias] == ["x", "y", "z"] and {r["unit"] for r in bias} == {"deg/h"}
+        assert all(r["sigma"] > 0 and r["frame"] == "body (B)" and r["verdict"] == "PASS" for r in bias)
+        truth = rep["summary"]["gyro_bias_rad_s"]
+        assert [r["value"] for r in bias] == pytest.approx([v * 180 / math.pi * 3600 for v in truth])
+    if job_type == "star_tracker_accuracy":
+        assert [(r["component"], r["verdict"]) for r in rows] == [("x1", "PASS"), ("x2", "PASS"), ("x3", "PASS")]
+        assert rows[0]["frame"] == "star tracker st1 (S)"
+    if job_type == "telemetry_coverage":
+        assert rows[0]["key"] == "n_gaps" and rows[0]["verdict"] == "FAIL"
+    if job_type == "reconstruction":
+        stages = {st["stage"]: st for st in headline["stages"]}
+        assert set(stages) >= {"data_screening", "star_tracker_accuracy", "gyro_bias_fit", "orbital_attitude"}
+        assert stages["star_tracker_accuracy"]["verdict"] == "pass" and headline["verdict"] != "none"
+        assert any(c["key"] == "stages.gyro_bias_fit.summary.gyro_bias_rad_s"
+                   for c in rep["specifications"]["checks"])
 
 
 def test_unknown_report_format_is_refused(world):
@@ -367,3 +416,87 @@ def test_input_description_counts_gaps_per_sensor():
     assert a["largest_gaps"] == [{"before_tai_ns": 2 * 10**9, "after_tai_ns": 5 * 10**9, "duration_s": 3.0,
                                   "missing": 2}]
     assert a["trailing_s"] == 4.0 and b["n_gaps"] == 0 and b["period_s"] == 10.0
+
+
+# --- figures: drawn in-process on the same simulated data, their geometry checked --------------------
+
+def _run_in_process(world, job_type: str):
+    """(TaskResult, params) of ``job_type`` run directly on the simulated streams of its spacecraft."""
+    from processing.spacecraft import Spacecraft
+    from processing.tasks import TaskInputs, no_progress
+
+    if job_type in world.skipped:
+        pytest.skip(world.skipped[job_type])
+    jt = registry()[job_type]
+    sim = world.worlds[world.where[job_type]]
+    names = stream_names(jt)
+    streams = {k: v for k, v in sim.streams.items() if k in names}
+    times = [np.asarray(v["time_tai_ns"], dtype=np.int64) for v in streams.values()] or [np.array([0])]
+    inputs = TaskInputs(streams=streams, spacecraft=Spacecraft.from_json(config_with_specs(sim.config)),
+                        start_tai_ns=int(min(t.min() for t in times)), end_tai_ns=int(max(t.max() for t in times)),
+                        reference={})
+    params = jt.params.model_validate({})
+    return jt.run(inputs, params, no_progress), params
+
+
+@pytest.mark.parametrize("job_type", all_type_names())
+def test_figures_have_no_overlapping_text(world, job_type):
+    result, params = _run_in_process(world, job_type)
+    figures = registry()[job_type].figures(result, params)
+    found = {name: figure_problems(fig) for name, fig in figures.items()}
+    assert not {k: v for k, v in found.items() if v}, found
+
+
+def test_screening_marks_exactly_the_rejected_samples(world):
+    result, params = _run_in_process(world, "data_screening")
+    fig = registry()["data_screening"].figures(result, params)["flags_timeline"]
+    marks = {line.get_gid(): len(line.get_xdata()) for line in fig.axes[0].get_lines()}
+    per_stream = {s: per["any"]["n_rejected"] for s, per in result.summary["streams"].items()
+                  if per["any"]["n_rejected"]}
+    n_rejected = result.summary["n_rejected"]
+    assert 0 < n_rejected < result.summary["n_total"] // 10  # a few rejections, not the whole window
+    assert sum(n for label, n in marks.items() if "any criterion" in label) == n_rejected
+    assert {label.split(":")[0]: n for label, n in marks.items() if "any criterion" in label} == per_stream
+    for s, per in result.summary["streams"].items():
+        for c, d in per.items():
+            if c != "any" and d["n_rejected"]:
+                assert marks[f"{s} / {c} ({d['n_rejected']})"] == d["n_rejected"], (s, c)
+
+
+def test_angle_statistics_never_straddle_180_degrees(world):
+    result, _ = _run_in_process(world, "vector_attitude")
+    roll = np.asarray(result.tables["attitude"]["roll_deg"], dtype=float)
+    roll = roll[np.isfinite(roll)]
+    stats = result.summary["roll_deg"]
+    continuous = np.degrees(np.unwrap(np.deg2rad(roll)))
+    assert np.abs(np.diff(continuous)).max() < 10.0  # the simulated roll is continuous ...
+    assert np.ptp(roll) > 300.0  # ... and passes +-180 deg in this window
+    assert stats["max"] - stats["min"] == pytest.approx(np.ptp(continuous))  # one range, not a 360 deg spread
+    assert stats["std"] == pytest.approx(np.std(continuous, ddof=1))
+    assert -180.0 < stats["mean"] <= 180.0
+
+
+def test_trend_figures_have_error_bars_full_dates_and_continuous_angles():
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.container import ErrorbarContainer
+
+    rad_s = math.pi / 180 / 3600  # 1 deg/h
+    jobs = [_fake_job(str(i), "gyro_bias_fit", i * 40 * 86400, {"gyro_bias_rad_s": [rad_s * (1 + i), 0.0, -rad_s],
+                                                                 "gyro_bias_sigma_rad_s": [0.1 * rad_s] * 3})
+            for i in range(3)]
+    jobs += [_fake_job(f"o{i}", "orbital_attitude", i * 86400, {"roll_deg": {"min": r - 1, "mean": r, "max": r + 1}})
+             for i, r in enumerate((178.0, 179.5, -179.5, -178.0))]
+    got = {t.metric.key: t for t in trends.trends(jobs, trends.KEY_METRICS, None)}
+    bias = got["gyro_bias_rad_s"]
+    assert bias.points[0].sigmas == pytest.approx((0.1, 0.1, 0.1))
+    assert [r["sigma"] for r in trends.rows([bias])] == pytest.approx([0.1] * 9)
+    fig = trends.figure(bias)
+    FigureCanvasAgg(fig).draw()
+    ax = fig.axes[0]
+    assert any(isinstance(c, ErrorbarContainer) for c in ax.containers)
+    ticks = [t.get_text() for t in ax.get_xticklabels() if t.get_text()]
+    assert ticks and all(re.match(r"\d{4}-\d{2}-\d{2}", t) for t in ticks), ticks  # year, month and day
+    assert not figure_problems(fig)
+    roll = trends.figure(got["roll_deg"])
+    means = roll.axes[0].get_lines()[1].get_ydata()  # components min, mean, max: the mean line
+    assert np.abs(np.diff(means)).max() < 5.0  # 179.5 -> -179.5 drawn as a 1 degree step, not 359

@@ -267,3 +267,222 @@ def test_sign_out(browser, service):
     wait_for(browser, lambda d: "/ui/login" in d.current_url)
     browser.get(service.base + "/ui/jobs")
     wait_for(browser, lambda d: "/ui/login" in d.current_url)
+
+
+# --- issue 20: headline, viewer, retraction, spacecraft and schedules, run form --------------------------
+
+DAY_SAT = "day-sat"
+DAY_SAMPLES = 864_000  # a day of 10 Hz
+FIRST_PLOT_BUDGET_MS = 2000.0
+
+
+def viewer_ready(driver: Any, fetches: int = 1, timeout_s: float = WAIT_S) -> dict[str, Any]:
+    wait_for(driver, lambda d: int(d.find_element(By.ID, "viewer").get_attribute("data-ready") or 0) >= fetches,
+             timeout_s)
+    return driver.execute_script("return window.__viewer")
+
+
+@pytest.fixture(scope="module")
+def day_of_10hz(service: Any) -> dict[str, Any]:
+    """A spacecraft with a day of 10 Hz gyro rates (864,000 samples, one spike)."""
+    from tests.app.report_world import START
+
+    service.api.post("/api/v1/spacecraft", {"name": DAY_SAT, "config": {"gyro": {"q_BG": [1, 0, 0, 0]}}})
+    t = START + np.arange(DAY_SAMPLES, dtype=np.int64) * 100_000_000
+    phase = np.arange(DAY_SAMPLES) * 2 * np.pi / 54_000.0  # one period per orbit of 90 min
+    rng = np.random.default_rng(20)
+    w = np.stack([1e-3 * np.sin(phase), 1e-3 * np.cos(phase), 5e-4 * np.sin(3 * phase)], 1)
+    w += rng.normal(0.0, 2e-5, w.shape)
+    w[400_000, 1] += 0.02
+    rec = service.api.upload_columns(DAY_SAT, "gyro", {"time_tai_ns": t, "wx": w[:, 0], "wy": w[:, 1], "wz": w[:, 2]})
+    assert rec["inserted"] == DAY_SAMPLES
+    return {"start": iso_array(t[:1])[0], "end": iso_array(t[-1:])[0]}
+
+
+def test_viewer_plots_a_day_of_10_hz_fast_and_zooms(browser, service, day_of_10hz):
+    sign_in(browser, service, "viewer", f"/ui/spacecraft/{DAY_SAT}")
+    browser.find_element(By.ID, "viewer-link").click()  # default view: the last hour
+    viewer_ready(browser)
+    query = urllib.parse.urlencode({"stream": "gyro", "sensor": "gyro", "start": day_of_10hz["start"],
+                                    "end": day_of_10hz["end"]})
+    browser.get(service.base + f"/ui/spacecraft/{DAY_SAT}/viewer?{query}")
+    timing = viewer_ready(browser)
+    first_ms = timing["firstPlotMs"]  # from the start of the navigation to the first drawn plot
+    (output_dir_web() / "viewer_timing.txt").write_text(
+        f"first plot of a day of 10 Hz gyro ({DAY_SAMPLES} samples x 3 columns): {first_ms:.0f} ms after navigation "
+        f"start; fetch {timing['fetchMs']:.0f} ms, server {timing['serverMs']:.0f} ms, {timing['nPlotted']} points\n")
+    assert timing["nSamples"] == DAY_SAMPLES and 0 < timing["nPlotted"] <= 3 * 8000
+    assert first_ms < FIRST_PLOT_BUDGET_MS, timing
+    panels = browser.find_elements(By.CSS_SELECTOR, "#viewer canvas")
+    assert [p.get_attribute("data-column") for p in panels] == ["wx", "wy", "wz"]
+    screenshot(browser, "20_viewer_day_10hz")
+    for _ in range(6):  # zoom in around the middle: the server sends the detail of the smaller window
+        n = int(browser.find_element(By.ID, "viewer").get_attribute("data-ready"))
+        browser.find_element(By.CSS_SELECTOR, "[data-act=zoom-in]").click()
+        timing = viewer_ready(browser, n + 1)
+    assert timing["nSamples"] < DAY_SAMPLES / 50
+    from selenium.webdriver.common.action_chains import ActionChains
+
+    n = int(browser.find_element(By.ID, "viewer").get_attribute("data-ready"))
+    ActionChains(browser).move_to_element(panels[0]).click_and_hold().move_by_offset(-200, 0).release().perform()
+    viewer_ready(browser, n + 1)  # panned: a new window fetched
+    shown = browser.execute_script("return window.__viewer.nSamples")
+    href = browser.find_element(By.ID, "dl-csv").get_attribute("href")
+    got = fetch(browser, href)
+    assert got["status"] == 200 and got["disposition"].startswith("attachment")
+    assert next(csv.reader(got["text"].splitlines())) == ["time", "sensor", "wx", "wy", "wz", "rejected_by"]
+    start, end = (urllib.parse.parse_qs(urllib.parse.urlsplit(href).query)[k][0] for k in ("start", "end"))
+    csv_rows = service.api.get(f"/api/v1/spacecraft/{DAY_SAT}/telemetry/gyro", params={"start": start, "end": end})
+    assert len(csv_rows.strip().splitlines()) - 1 == shown  # the download holds exactly the view
+    screenshot(browser, "21_viewer_zoomed", full_page=False)
+
+
+def output_dir_web() -> Any:
+    from tests.app.report_world import output_dir
+
+    return output_dir("web")
+
+
+def test_viewer_marks_and_lists_the_rejected_samples(browser, service):
+    job = service.jobs["data_screening"]
+    sign_in(browser, service, "viewer", f"/ui/spacecraft/{job['spacecraft']}/viewer?"
+            + urllib.parse.urlencode({"stream": "magnetometer", "start": job["start"], "end": job["end"],
+                                      "screening": job["id"]}))
+    viewer_ready(browser)
+    summary = service.api.get(f"/api/v1/jobs/{job['id']}")["result"]["streams"]["magnetometer"]
+    expected = sum(d["n_rejected"] for c, d in summary.items() if c != "any")
+    rows = browser.find_elements(By.CSS_SELECTOR, "#rejected-table tbody tr")
+    assert expected > 0 and len(rows) == expected
+    criteria = {r.find_elements(By.TAG_NAME, "td")[2].text for r in rows}
+    assert criteria == {c for c, d in summary.items() if c != "any" and d["n_rejected"]}
+    assert all(r.find_elements(By.TAG_NAME, "td")[4].text != "—" for r in rows)  # every threshold shown
+    assert len(browser.find_elements(By.CSS_SELECTOR, "#viewer canvas")) == 3  # bx, by, bz, the rejected marked
+    screenshot(browser, "22_viewer_rejected_samples")
+
+
+def test_retract_an_upload_from_the_ui(browser, service):
+    sc = UPLOAD_TARGET
+    rec = service.api.upload_columns(sc, "gyro", {"time_tai_ns": np.arange(20, dtype=np.int64) * 10**9
+                                                  + int(1.7e18), "wx": np.ones(20), "wy": np.zeros(20),
+                                                  "wz": np.zeros(20)})
+    used = service.api.post("/api/v1/jobs", {"type": "telemetry_coverage", "spacecraft": sc})["id"]
+    assert service.api.wait_for_job(used, timeout_s=120)["status"] == "succeeded"
+    sign_in(browser, service, "operator", f"/ui/spacecraft/{sc}#uploads")
+    row = browser.find_element(By.CSS_SELECTOR, f"tr[data-ingest='{rec['ingest_id']}']")
+    row.find_element(By.TAG_NAME, "summary").click()
+    row.find_element(By.NAME, "reason").send_keys("test upload, wrong spacecraft")
+    row.find_element(By.CSS_SELECTOR, "button.danger").click()
+    alert = wait_for(browser, lambda d: d.switch_to.alert)
+    assert "Retract this upload" in alert.text
+    alert.accept()
+    ok = wait_for(browser, lambda d: d.find_element(By.ID, "retracted-ok"))
+    assert "20 samples removed" in ok.text and "1 job marked" in ok.text
+    log = browser.find_element(By.ID, "retractions-table").text
+    assert "test upload, wrong spacecraft" in log and "web-operator" in log and used[:8] in log
+    assert not browser.find_elements(By.CSS_SELECTOR, f"tr[data-ingest='{rec['ingest_id']}']")
+    screenshot(browser, "23_retracted")
+    assert service.api.get(f"/api/v1/spacecraft/{sc}/telemetry/gyro").strip().count(b"\n") == 0  # header only
+    browser.get(service.base + f"/ui/jobs/{used}")
+    assert "Based on retracted data" in browser.find_element(By.ID, "retracted").text
+    browser.get(service.base + f"/ui/jobs?spacecraft={sc}")
+    assert "retracted data" in browser.find_element(By.CSS_SELECTOR, f"tr[data-job='{used}'] td.result").text
+
+
+def test_create_a_spacecraft_and_edit_its_configuration(browser, service):
+    sign_in(browser, service, "admin", "/ui/")
+    browser.find_element(By.ID, "new-spacecraft").click()
+    wait_for(browser, lambda d: d.find_element(By.ID, "sc-name"))
+    browser.find_element(By.ID, "sc-name").send_keys("ui-sat")
+    area = browser.find_element(By.ID, "sc-config")
+    area.clear()
+    area.send_keys('{"star_tracker": {"st1": {"q_BS": [1, 0, 0, 0]}}, "gyro": {"q_BG": [1, 0, 0, 0.5]}}')
+    browser.find_element(By.ID, "config-save").click()
+    errors = wait_for(browser, lambda d: d.find_element(By.ID, "field-errors")).text
+    assert "config.star_tracker" in errors and "did you mean 'star_trackers'" in errors
+    assert "config.gyro.q_BG" in errors and "norm" in errors
+    screenshot(browser, "24_spacecraft_invalid_config")
+    area = browser.find_element(By.ID, "sc-config")
+    area.clear()
+    area.send_keys('{"star_trackers": {"st1": {"q_BS": [1, 0, 0, 0]}}, "gyro": {"q_BG": [1, 0, 0, 0]}}')
+    browser.find_element(By.ID, "config-save").click()
+    assert "created" in wait_for(browser, lambda d: d.find_element(By.ID, "created-ok")).text
+    browser.find_element(By.ID, "config-link").click()
+    area = wait_for(browser, lambda d: d.find_element(By.ID, "sc-config"))
+    area.clear()
+    area.send_keys('{"star_trackers": {"st1": {"q_BS": [1, 0, 0, 0]}}, "sun_sensor": {"q_BS": [1, 0, 0, 0]}}')
+    browser.find_element(By.ID, "config-save").click()
+    assert "version 2" in wait_for(browser, lambda d: d.find_element(By.ID, "config-saved")).text
+    assert service.api.get("/api/v1/spacecraft/ui-sat")["config_version"] == 2
+    screenshot(browser, "25_spacecraft_created")
+
+
+def test_schedules_list_create_and_delete(browser, service):
+    sign_in(browser, service, "operator", "/ui/schedules")
+    browser.find_element(By.ID, "s-name").send_keys("nightly-coverage")
+    cron = browser.find_element(By.ID, "s-cron")
+    cron.clear()
+    cron.send_keys("0 3 * * *")
+    Select(browser.find_element(By.ID, "s-type")).select_by_value("telemetry_coverage")
+    Select(browser.find_element(By.ID, "s-sc")).select_by_value(SPACECRAFT)
+    browser.find_element(By.ID, "s-params").clear()
+    browser.find_element(By.ID, "s-params").send_keys('{"gap_factr": 2}')
+    browser.find_element(By.CSS_SELECTOR, "#schedule-form button").click()
+    error = wait_for(browser, lambda d: d.find_element(By.ID, "form-error")).text
+    assert "gap_factr" in error and "did you mean 'gap_factor'" in error
+    browser.find_element(By.ID, "s-params").clear()
+    browser.find_element(By.ID, "s-params").send_keys('{"gap_factor": 2}')
+    browser.find_element(By.CSS_SELECTOR, "#schedule-form button").click()
+    wait_for(browser, lambda d: re.search(r"/ui/schedules/[0-9a-f]{32}$", d.current_url))
+    assert "nightly-coverage" in browser.find_element(By.TAG_NAME, "h1").text
+    assert browser.find_element(By.ID, "no-runs")
+    screenshot(browser, "26_schedule")
+    browser.get(service.base + "/ui/schedules")
+    assert "nightly-coverage" in browser.find_element(By.ID, "schedules-table").text
+    screenshot(browser, "27_schedules")
+    browser.find_element(By.LINK_TEXT, "nightly-coverage").click()
+    browser.find_element(By.CSS_SELECTOR, "#delete-schedule button").click()
+    wait_for(browser, lambda d: d.switch_to.alert).accept()
+    wait_for(browser, lambda d: d.find_element(By.ID, "schedule-deleted"))
+    assert service.api.get("/api/v1/schedules") == []
+
+
+def test_run_form_is_generated_from_the_parameter_schema(browser, service):
+    sign_in(browser, service, "operator", "/ui/jobs/new?type=data_screening")
+    k_energy = browser.find_element(By.ID, "p-data_screening-k_energy")
+    assert k_energy.get_attribute("type") == "number" and k_energy.get_attribute("value") == "4.0"
+    assert "k1 of eq. 15" in browser.find_element(By.ID, "p-data_screening-k_energy-help").text
+    model = Select(browser.find_element(By.ID, "p-data_screening-energy_model"))
+    assert [o.get_attribute("value") for o in model.options] == ["j2", "two_body"]
+    model.select_by_value("two_body")
+    assert json.loads(browser.find_element(By.ID, "j-params").get_attribute("value"))["energy_model"] == "two_body"
+    screenshot(browser, "28_run_form")
+    Select(browser.find_element(By.ID, "j-type")).select_by_value("executor_check")
+    assert browser.find_element(By.ID, "p-executor_check-duration_s").is_displayed()
+    assert not browser.find_element(By.ID, "p-data_screening-k_energy").is_displayed()
+    params = browser.find_element(By.ID, "j-params")
+    params.clear()
+    params.send_keys('{"duraton_s": 1}')
+    browser.find_element(By.CSS_SELECTOR, "#job-form button[type=submit]").click()
+    error = wait_for(browser, lambda d: d.find_element(By.ID, "submit-error")).text
+    assert "params.duraton_s" in error and "did you mean 'duration_s'" in error
+    screenshot(browser, "29_run_form_did_you_mean", full_page=False)
+
+
+def test_headline_first_on_the_job_page_and_in_the_report(browser, service):
+    job = service.jobs["gyro_bias_fit"] if "gyro_bias_fit" in service.jobs else service.jobs["telemetry_coverage"]
+    sign_in(browser, service, "viewer", f"/ui/jobs/{job['id']}")
+    headline = browser.find_element(By.ID, "headline")
+    assert "Value ± 1σ" in headline.text and "Frame" in headline.text
+    browser.find_element(By.ID, "report-link").click()
+    wait_for(browser, lambda d: d.current_url.endswith("/report"))
+    first_h2 = browser.find_elements(By.TAG_NAME, "h2")[0]
+    assert first_h2.get_attribute("id") == "headline-h"
+    assert not browser.find_element(By.ID, "rerun-request").is_displayed()  # collapsed until opened
+    screenshot(browser, "30_report_headline", full_page=False)
+    browser.get(service.base + f"/ui/jobs?spacecraft={SPACECRAFT}")
+    cells = [r.find_element(By.CSS_SELECTOR, "td.result").text for r in browser.find_elements(By.CSS_SELECTOR,
+                                                                                              "tr[data-job]")]
+    assert any("±" in c or ":" in c for c in cells)
+    assert all(r.find_elements(By.TAG_NAME, "td")[-2].text.endswith(("s", "min")) for r in browser.find_elements(
+        By.CSS_SELECTOR, "tr[data-status=succeeded]"))
+    screenshot(browser, "31_jobs_with_results")

@@ -13,7 +13,7 @@ import pytest
 from app.web.auth import COOKIE, csrf_token
 from tests.app.helpers import issue_keys, make_spacecraft, run_coverage_jobs, upload
 from tests.app.test_access_control import app_routes
-from tests.web.access_table import PUBLIC, WEB_ACCESS
+from tests.web.access_table import JSON_ROUTES, PUBLIC, WEB_ACCESS
 
 GYRO_CSV = "time,wx,wy,wz\n2023-06-01T00:00:00Z,1,2,3\n2023-06-01T00:00:01Z,1,2,3\n"
 LOWER = {"viewer": None, "operator": "viewer", "admin": "operator"}
@@ -37,7 +37,9 @@ def world(client, monkeypatch):
 def fill(path: str, sc: str, world) -> str:
     return (path.replace("{name}/telemetry/{stream}", f"{sc}/telemetry/gyro").replace("{stream}", "gyro")
             .replace("spacecraft/{name}", f"spacecraft/{sc}").replace("{job_id}", world["jobs"][sc])
-            .replace("artifacts/{name}", "artifacts/coverage.csv").replace("static/{name}", "static/app.css"))
+            .replace("artifacts/{name}", "artifacts/coverage.csv").replace("static/{name}", "static/app.css")
+            .replace("{fmt}", "csv").replace("{ingest_id}", "nosuch").replace("{file_id}", "999999")
+            .replace("{schedule_id}", "nosuch"))
 
 
 def call(client, method: str, path: str, secret: str | None, sc: str = "A", token: bool = True, **headers):
@@ -81,7 +83,7 @@ def test_sessions_and_roles(client, world):
             continue
         for secret in (None, keys["revoked"], "att_not_a_key"):
             r = call(client, method, path, secret)
-            if template == "/ui/jobs/status":
+            if template in JSON_ROUTES:
                 assert r.status_code == 401, (method, path, r.status_code)
             else:
                 assert is_login_redirect(r), (method, path, secret, r.status_code)

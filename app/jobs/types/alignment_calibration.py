@@ -26,6 +26,7 @@ from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field, PositiveFloat, model_validator
 
 from app.jobs.registry import JobType
+from app.reports.headline import Answer
 from processing.attitude import rotations
 from processing.gyro_calibration.calibration import CalibrationSettings, GyroCalibration, calibrate_gyro
 from processing.gyro_calibration.drift_observer import MODE_NAMES, stationary_noise
@@ -544,4 +545,9 @@ JOB = JobType(
         "12-18 s windows of slow motion, iterated until the change is below noise. Unobservable misalignment axes "
         "are reported as null."
     ),
+    headline=(Answer("misalignment_rad", "Gyro-to-star-tracker misalignment (rotation vector of q_GS)",
+                     sigma="misalignment_sigma_rad", frame="gyro G relative to star tracker {sensor} (S)"),
+              Answer("scale_factor_error", "Gyro scale-factor error m", sigma="scale_factor_error_sigma", unit="ppm",
+                     scale=1e6),
+              Answer("drift_rad_s", "Gyro drift b at the end of the window", frame="gyro (G)")),
 )

@@ -9,6 +9,7 @@ from matplotlib.figure import Figure
 from pydantic import BaseModel, ConfigDict, Field
 
 from app.jobs.registry import JobType
+from app.reports.headline import Answer
 from processing.screening.coverage import find_gaps
 from processing.tasks import Progress, TaskInputs, TaskResult
 from processing.units import NS_PER_S
@@ -101,4 +102,5 @@ JOB = JobType(
     any_stream=True, figures=figures,
     description="Per stream and sensor: samples, nominal period, gaps (last sample before, first after, "
                 "missing samples) and completeness over the window.",
+    headline=(Answer("n_gaps", "Gaps in the window"), Answer("n_streams", "Streams with samples")),
 )

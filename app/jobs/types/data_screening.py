@@ -15,6 +15,7 @@ from matplotlib.figure import Figure
 from pydantic import BaseModel, ConfigDict, Field
 
 from app.jobs.registry import JobType
+from app.reports.headline import Answer
 from processing.screening.criteria import ScreeningParams, screen
 from processing.screening.flags import flags_table
 from processing.tasks import Progress, TaskError, TaskInputs, TaskResult
@@ -130,57 +131,97 @@ def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
     return TaskResult(summary=summary, tables=tables, notes=notes)
 
 
+def _rejected_by(reasons: np.ndarray, criterion: str) -> np.ndarray:
+    """Rows whose ';'-joined reasons name ``criterion``."""
+    return np.char.find(np.char.add(np.char.add(";", reasons.astype(str)), ";"), f";{criterion};") >= 0
+
+
+def _timeline(result: TaskResult, t0: int) -> Figure:
+    """One row per stream (every rejected sample once) and one per stream and criterion."""
+    flags = result.tables["flags"]
+    t_all = np.asarray(flags["time_tai_ns"], dtype=np.int64)
+    reasons = np.asarray(flags["reasons"]).astype(str)
+    streams = np.asarray(flags["stream"]).astype(str)
+    rejected = ~np.asarray(flags["accepted"], dtype=bool)
+    rows: list[tuple[str, np.ndarray, str]] = []  # label, selection, colour
+    for s, per in result.summary["streams"].items():
+        n_any = int(per.get("any", {}).get("n_rejected", 0))
+        if n_any == 0:
+            continue
+        rows.append((f"{s}: any criterion ({n_any})", (streams == s) & rejected, "k"))
+        for c, d in per.items():
+            if c != "any" and d["n_rejected"] > 0:
+                rows.append((f"{s} / {c} ({d['n_rejected']})", (streams == s) & _rejected_by(reasons, c), "tab:red"))
+    n_rej, n_tot = int(result.summary["n_rejected"]), int(result.summary["n_total"])
+    fig = Figure(figsize=(10, 1.4 + 0.32 * max(1, len(rows))), layout="constrained",
+                 label="Rejected samples by stream and criterion")
+    ax = fig.add_subplot()
+    for i, (_label, sel, colour) in enumerate(rows):
+        ax.plot((t_all[sel] - t0) / NS_PER_S / 60.0, np.full(int(sel.sum()), len(rows) - 1 - i), "|", color=colour,
+                ms=10, gid=_label)
+    ax.set_yticks(range(len(rows)), [r[0] for r in reversed(rows)], fontsize=8)
+    ax.set_ylim(-0.7, max(1, len(rows)) - 0.3)
+    span_min = float(t_all.max() - t0) / NS_PER_S / 60.0
+    ax.set_xlim(-0.02 * span_min, 1.02 * span_min)  # the whole screened window, not just the rejections
+    ax.set_xlabel(f"minutes since {_iso_utc(t0)}")
+    ax.set_title(f"Rejected samples: {n_rej:,} of {n_tot:,} (each mark is one sample; a sample may fail several "
+                 "criteria)", fontsize=10)
+    ax.grid(axis="x", alpha=0.3)
+    return fig
+
+
+CRITERION_LABELS = {"energy": "|h - h_ref| [m²/s²]\n(eq. 15)", "field_magnitude": "| |H| - |H_model| | [nT]\n(eq. 16)",
+                    "panel_eclipse": "I - ν I_max [A]\n(eq. 17, shadow)", "panel_sun_norm": "| |s| - 1 |\n(eq. 17)",
+                    "orbit_plane": "orbit-normal\ndeviation [rad]", "velocity": "|v - v_fit| [m/s]"}
+
+
+def _criteria(stats: dict[str, Any], t0: int) -> Figure:
+    crit_col = np.asarray(stats["criterion"]).astype(str)
+    crits = [c for c in STATISTIC_CRITERIA if np.any(crit_col == c)]
+    fig = Figure(figsize=(10, 2.2 * len(crits) + 0.6), layout="constrained",
+                 label="Criteria of 002 eqs. 15-17 against time")
+    axes = fig.subplots(len(crits), 1, sharex=True, squeeze=False)[:, 0]
+    for i, (ax, c) in enumerate(zip(axes, crits, strict=True)):
+        sel = crit_col == c
+        t = (np.asarray(stats["time_tai_ns"], np.int64)[sel] - t0) / NS_PER_S / 60.0
+        y = np.asarray(stats["statistic"], float)[sel]
+        f = np.asarray(stats["flagged"], bool)[sel]
+        th = float(np.nanmax(np.asarray(stats["threshold"], float)[sel]))
+        log = c != "panel_eclipse" and np.isfinite(th) and th > 0
+        if log:  # magnitudes (>= 0) on a log axis; the few below th/1e4 are drawn on its floor
+            floor = th * 1e-4
+            y = np.where(np.isfinite(y), np.maximum(y, floor), y)
+            ax.set_yscale("log")
+        ax.plot(t[~f], y[~f], ".", ms=2, color="tab:blue", label="accepted")
+        ax.plot(t[f], y[f], "x", ms=5, color="tab:red", label="rejected")
+        if np.isfinite(th):
+            ax.axhline(th, color="k", lw=0.8, ls="--", label="threshold")
+        if log:
+            ax.set_ylim(bottom=max(floor / 2.0, ax.get_ylim()[0]))
+        ax.set_ylabel(CRITERION_LABELS.get(c, c), fontsize=8)
+        ax.grid(alpha=0.3)
+        if i == 0:
+            ax.legend(fontsize=7, loc="upper right", ncols=3)
+    axes[-1].set_xlabel(f"minutes since {_iso_utc(t0)}")
+    return fig
+
+
+def _iso_utc(t_tai_ns: int) -> str:
+    from processing.time import timescales
+
+    return str(timescales.tai_ns_to_iso(np.array([t_tai_ns], dtype=np.int64))[0])
+
+
 def figures(result: TaskResult, params: Params) -> dict[str, Figure]:
     flags = result.tables.get("flags")
     out: dict[str, Figure] = {}
     if flags is None or len(flags["time_tai_ns"]) == 0:
         return out
-    t_all = np.asarray(flags["time_tai_ns"], dtype=np.int64)
-    t0 = int(t_all.min())
-    reasons = np.asarray(flags["reasons"]).astype(str)
-    streams = np.asarray(flags["stream"]).astype(str)
-    labels: list[tuple[str, str]] = []
-    for s, per in result.summary["streams"].items():
-        for c, d in per.items():
-            if c != "any" and d["n_rejected"] > 0:
-                labels.append((s, c))
-    fig = Figure(figsize=(10, 1.0 + 0.35 * max(1, len(labels))), label="Rejected samples by stream and criterion")
-    ax = fig.add_subplot()
-    for i, (s, c) in enumerate(labels):
-        sel = (streams == s) & np.char.find(np.char.add(np.char.add(";", reasons), ";"), f";{c};") >= 0
-        ax.plot((t_all[sel] - t0) / NS_PER_S / 60.0, np.full(int(sel.sum()), i), "|", color="tab:red", ms=10)
-    ax.set_yticks(range(len(labels)), [f"{s} / {c}" for s, c in labels])
-    ax.set_ylim(-0.7, max(1, len(labels)) - 0.3)
-    ax.set_xlabel("time since the first sample [min]")
-    ax.set_title("Rejected samples (each mark is a sample; a sample may fail several criteria)")
-    ax.grid(axis="x", alpha=0.3)
-    out["flags_timeline"] = fig
+    t0 = int(np.asarray(flags["time_tai_ns"], dtype=np.int64).min())
+    out["flags_timeline"] = _timeline(result, t0)
     stats = result.tables.get("statistics")
     if stats is not None and len(stats["time_tai_ns"]):
-        crits = [c for c in STATISTIC_CRITERIA if np.any(np.asarray(stats["criterion"]).astype(str) == c)]
-        fig2 = Figure(figsize=(10, 2.4 * len(crits)), label="Criteria of 002 eqs. 15-17 against time")
-        units = {"energy": "|h - h_ref| [m^2/s^2] (eq. 15)", "field_magnitude": "| |H| - |H_model| | [nT] (eq. 16)",
-                 "panel_eclipse": "I - nu I_max [A] (eq. 17, shadow)", "panel_sun_norm": "| |s| - 1 | (eq. 17)",
-                 "orbit_plane": "orbit-normal deviation [rad]", "velocity": "|v - v_fit| [m/s]"}
-        for i, c in enumerate(crits):
-            ax = fig2.add_subplot(len(crits), 1, i + 1)
-            sel = np.asarray(stats["criterion"]).astype(str) == c
-            t = (np.asarray(stats["time_tai_ns"], np.int64)[sel] - t0) / NS_PER_S / 60.0
-            y = np.asarray(stats["statistic"], float)[sel]
-            f = np.asarray(stats["flagged"], bool)[sel]
-            ax.plot(t[~f], y[~f], ".", ms=2, color="tab:blue", label="accepted")
-            ax.plot(t[f], y[f], "x", ms=5, color="tab:red", label="rejected")
-            th = float(np.nanmax(np.asarray(stats["threshold"], float)[sel]))
-            if np.isfinite(th):
-                ax.axhline(th, color="k", lw=0.8, ls="--", label="threshold")
-            if c != "panel_eclipse" and np.isfinite(th) and th > 0:
-                ax.set_yscale("symlog", linthresh=th / 10.0)
-            ax.set_ylabel(units.get(c, c), fontsize=8)
-            ax.grid(alpha=0.3)
-            if i == 0:
-                ax.legend(fontsize=7, loc="upper right")
-        fig2.axes[-1].set_xlabel("time since the first sample [min]")
-        out["criteria"] = fig2
+        out["criteria"] = _criteria(stats, t0)
     return out
 
 
@@ -191,4 +232,7 @@ JOB = JobType(
                 "criteria it fails: energy integral (eq. 15, J2-aware), field magnitude against IGRF-14 (eq. 16), "
                 "panel currents against the shadow/unit-sun models (eq. 17), orbit plane, kinematic and velocity "
                 "consistency, spikes, stuck values and time-grid errors. Nothing is deleted.",
+    headline=(Answer("n_rejected", "Rejected samples, all streams"),
+              Answer("rejected_fraction", "Rejected share of the samples", unit="%", scale=100.0),
+              Answer("streams.*.any.n_rejected", "Rejected samples per stream")),
 )

@@ -18,13 +18,14 @@ from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field, PositiveFloat
 
 from app.jobs.registry import JobType
+from app.reports.headline import Answer
 from processing.attitude import rotations
 from processing.gyro_calibration.bias_fit import GyroBiasFit, GyroBiasFitError, estimate_gyro_arw, fit_gyro_bias
 from processing.gyro_calibration.subintervals import fit_subintervals, subinterval_edges
 from processing.signal.sine_series import SineSeriesError, fit_sine_series, select_harmonics
 from processing.tasks import Progress, TaskError, TaskInputs, TaskResult
 from processing.time.timescales import tai_ns_to_iso
-from processing.units import ARCSEC_PER_RAD, NS_PER_S, RAD_PER_ARCSEC, RAD_PER_DEG
+from processing.units import ARCSEC_PER_RAD, DEG_H_PER_RAD_S, NS_PER_S, RAD_PER_ARCSEC, RAD_PER_DEG
 
 RATES_TABLE_MAX_ROWS = 20_000
 """The "rates" table (figure 13a) keeps every k-th gyro sample so that it has at most this many rows."""
@@ -490,20 +491,24 @@ def figures(result: TaskResult, params: Params) -> dict[str, Figure]:
     axes = fig.subplots(3, 1, sharex=True)
     a, e = seconds(sub["start_tai_ns"]), seconds(sub["end_tai_ns"])
     t_end = float(seconds(res["time_tai_ns"]).max())
-    for i, ax in enumerate(axes):
-        d = summary["delta_sensor_arcsec_s"][i]
-        s = summary["delta_sensor_sigma_arcsec_s"][i]
+    to_deg_h = DEG_H_PER_RAD_S
+    for i, ax in enumerate(axes):  # body axes and deg/h: the frame and unit of the summary and the specification
+        d = summary["gyro_bias_rad_s"][i] * to_deg_h
+        s = summary["gyro_bias_sigma_rad_s"][i] * to_deg_h
         ax.axhspan(d - 3 * s, d + 3 * s, color="0.85", label="whole segment ±3σ")
         ax.hlines(d, 0.0, t_end, color="k", lw=1.0)
-        v, sv = sub[f"delta{i + 1}_sensor_arcsec_s"], sub[f"delta{i + 1}_sensor_sigma_arcsec_s"]
+        v = np.asarray(sub[f"gyro_bias{i + 1}_rad_s"], dtype=float) * to_deg_h
+        sv = np.asarray(sub[f"gyro_bias{i + 1}_sigma_rad_s"], dtype=float) * to_deg_h
         ok = np.isfinite(v)
         ax.hlines(v[ok], a[ok], e[ok], color="C0", lw=2.0)
         ax.errorbar(0.5 * (a[ok] + e[ok]), v[ok], yerr=3 * sv[ok], fmt="none", ecolor="C0", capsize=3,
                     label="sub-interval ±3σ")
-        ax.set_ylabel(f"Δ{i + 1}, arcsec/s")
+        ax.set_ylabel(f"b_{'xyz'[i]} (body), deg/h")
     axes[0].legend(loc="upper right", fontsize="small")
     axes[-1].set_xlabel(f"t, s from {start}")
-    fig.suptitle(f"Gyro offsets Δ per sub-interval, {ref} axes (003 §2.4, figs. 15-16)")
+    fig.suptitle("Gyro bias b per sub-interval, body axes x y z (w_meas = w + b), as in the specification\n"
+                 f"(003 §2.4 figs. 15-16 show Δ = -b in {ref} sensor axes, arcsec/s: summary delta_sensor_arcsec_s)",
+                 fontsize="medium")
     figs["subintervals"] = fig
     return figs
 
@@ -523,4 +528,8 @@ JOB = JobType(
         "(gyro-noise) and paper sigmas, residuals per sensor axis, sub-interval offsets and, optionally, "
         "the mounting with an observability check."
     ),
+    headline=(Answer("gyro_bias_rad_s", "Gyro bias b (w_meas = w + b)", sigma="gyro_bias_sigma_rad_s",
+                     frame="body (B)"),
+              Answer("star_tracker_sigma_arcsec", "Star-tracker noise 1σ", frame="star tracker {reference_sensor} (S)"),
+              Answer("residual_rms_arcsec", "Fit residual rms", frame="star tracker {reference_sensor} (S)")),
 )

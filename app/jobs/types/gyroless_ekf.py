@@ -16,8 +16,10 @@ from matplotlib.figure import Figure
 from pydantic import BaseModel, ConfigDict, Field
 
 from app.jobs.registry import JobType
+from app.reports.headline import Answer
 from processing.gyroless.ekf import FilterTuning
 from processing.gyroless.estimation import GyrolessError, GyrolessResult, GyrolessSettings, estimate_gyroless_attitude
+from processing.star_tracker.orbital_attitude import angle_stats_deg
 from processing.tasks import Progress, TaskError, TaskInputs, TaskResult
 from processing.units import DEG_PER_RAD, NS_PER_S
 
@@ -54,10 +56,6 @@ def _clean(value: Any) -> Any:
     if isinstance(value, (np.integer, np.bool_)):
         return value.item()
     return value
-
-
-def _stats(x: np.ndarray) -> dict[str, float]:
-    return {"mean": float(np.mean(x)), "std": float(np.std(x)), "min": float(np.min(x)), "max": float(np.max(x))}
 
 
 def _sensor(inputs: TaskInputs, stream: str, requested: str | None) -> str | None:
@@ -108,9 +106,9 @@ def _summary(r: GyrolessResult, params: Params) -> dict[str, Any]:
                       "fraction_outside": wh.fraction_outside, "max_abs_rho": wh.max_abs_rho,
                       "rho": wh.rho},
         "innovation_rms_deg": {"magnetometer": rms(res[:, 0]), "sun_sensor": rms(res[:, 1])},
-        "roll_deg": _stats(r.roll_rad * DEG_PER_RAD),
-        "pitch_deg": _stats(r.pitch_rad * DEG_PER_RAD),
-        "yaw_deg": _stats(r.yaw_rad * DEG_PER_RAD),
+        "roll_deg": angle_stats_deg(r.roll_rad),
+        "pitch_deg": angle_stats_deg(r.pitch_rad),
+        "yaw_deg": angle_stats_deg(r.yaw_rad),
         "attitude_sigma_deg": {
             "median": np.median(sig, axis=0).tolist(),
             "max_after_convergence": (sig[after].max(axis=0).tolist() if np.any(after) else None),
@@ -323,4 +321,9 @@ JOB = JobType(
     description="Attitude q_OB (orbital frame of 004), rates and in-plane disturbance torque from magnetometer, "
                 "sun sensor and GNSS with the EKF of paper 004 or a multiplicative EKF, plus an RTS smoother; "
                 "reference field IGRF-14, Sun from ERFA; consistency by NIS and innovation whiteness.",
+    headline=(*(Answer(f"{a}_deg.mean", f"{a.capitalize()}, mean over the window", sigma=f"{a}_deg.std",
+                       sigma_label="std", frame="body B in the orbital frame O (004)")
+                for a in ("roll", "pitch", "yaw")),
+              Answer("attitude_sigma_deg.median", "Attitude estimate 1σ (median)", frame="about the body axes (B)"),
+              Answer("converged", "Filter converged")),
 )

@@ -17,6 +17,7 @@ from matplotlib.figure import Figure
 from pydantic import BaseModel, ConfigDict, Field
 
 from app.jobs.registry import JobType
+from app.reports.headline import Answer
 from processing.formats.ccsds_adm import aem_segment, write_aem
 from processing.frames.earth_orientation import EarthOrientation, FrameInputError
 from processing.frames.eop import EopCoverageError, interpolate_eop
@@ -200,4 +201,7 @@ JOB = JobType(
                 "quaternions, the mounting and GNSS states (smoothed), with Earth orientation from an uploaded "
                 "IERS finals2000A data set or zero; statistics, time series, virtual orbit and a CCSDS AEM of the "
                 "body attitude.",
+    headline=tuple(Answer(f"{a}_deg.mean", f"Orbital {a}, mean over the window", sigma=f"{a}_deg.std",
+                          sigma_label="std", frame="body B in the orbital frame O ({orbital_frame})",
+                          judged_by=(f"{a}_deg.min", f"{a}_deg.max")) for a in ("pitch", "yaw", "roll")),
 )

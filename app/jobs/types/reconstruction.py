@@ -256,4 +256,5 @@ JOB = JobType(
     any_stream=True, figures=figures,
     description="Screening -> star-tracker accuracy -> gyro fit -> orbital attitude (-> alignment calibration) on "
                 "one window, passing screened data and the gyro bias along; one combined report.",
+    headline=(),  # each stage's own headline (app.reports.job_report)
 )

@@ -14,6 +14,7 @@ from matplotlib.figure import Figure
 from pydantic import BaseModel, ConfigDict, Field
 
 from app.jobs.registry import JobType
+from app.reports.headline import Answer
 from processing.star_tracker.accuracy import (
     StarTrackerAccuracy,
     StarTrackerAccuracyError,
@@ -360,4 +361,6 @@ JOB = JobType(
         "data the real high-frequency motion (spectral lines) is removed, the rates are compared and the spectra "
         "show where lines alias into the star-tracker samples."
     ),
+    headline=(Answer("sigma_arcsec", "Star-tracker accuracy: 1σ noise per sensor axis (003 §1)", components="axes",
+                     frame="star tracker {sensor} (S)"),),
 )

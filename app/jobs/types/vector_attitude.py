@@ -14,7 +14,9 @@ from matplotlib.figure import Figure
 from pydantic import BaseModel, ConfigDict, Field
 
 from app.jobs.registry import JobType
+from app.reports.headline import Answer
 from processing.screening.criteria import ScreeningParams, screen
+from processing.star_tracker.orbital_attitude import angle_stats_deg
 from processing.tasks import Progress, TaskError, TaskInputs, TaskResult
 from processing.units import DEG_PER_RAD, NS_PER_S
 from processing.vector_attitude.determination import (
@@ -57,11 +59,13 @@ class Params(BaseModel):
 
 
 def _stats_deg(x: np.ndarray) -> dict[str, float | None]:
-    x = np.asarray(x, dtype=float) * DEG_PER_RAD
+    """Statistics of an angle series [rad -> deg] on the continuous (unwrapped) series: a roll passing
+    +-180 deg is one range, never a 360 deg spread (processing.star_tracker.orbital_attitude.angle_stats_deg)."""
+    x = np.asarray(x, dtype=float)
     x = x[np.isfinite(x)]
     if x.size == 0:
         return {"mean": None, "std": None, "min": None, "max": None}
-    return {"mean": float(x.mean()), "std": float(x.std()), "min": float(x.min()), "max": float(x.max())}
+    return dict(angle_stats_deg(x))
 
 
 def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
@@ -132,6 +136,16 @@ def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
     return TaskResult(summary=summary, tables={"attitude": table}, notes=notes)
 
 
+def _continuous_deg(y: np.ndarray) -> np.ndarray:
+    """Angles [deg] without the +-180 jumps (unwrapped in time order), the mean kept in (-180, 180]."""
+    y = np.asarray(y, dtype=float).copy()
+    ok = np.isfinite(y)
+    if ok.any():
+        y[ok] = np.rad2deg(np.unwrap(np.deg2rad(y[ok])))
+        y[ok] -= 360.0 * np.round(np.mean(y[ok]) / 360.0)
+    return y
+
+
 def figures(result: TaskResult, params: Params) -> dict[str, Figure]:
     tab = result.tables["attitude"]
     t = np.asarray(tab["time_tai_ns"], dtype=np.int64)
@@ -139,10 +153,12 @@ def figures(result: TaskResult, params: Params) -> dict[str, Figure]:
         return {}
     x = (t - t[0]) / NS_PER_S / 60.0
     method = np.asarray(tab["method"]).astype(str)
-    fig = Figure(figsize=(10, 8), label="Attitude in the orbital frame of 002 (pitch, yaw, roll)")
+    fig = Figure(figsize=(10, 8), layout="constrained",
+                 label="Attitude of the body in the orbital frame of 002 (pitch, yaw, roll)")
+    axes = fig.subplots(4, 1, sharex=True, height_ratios=(1, 1, 1, 0.6))
     for i, name in enumerate(("pitch_deg", "yaw_deg", "roll_deg")):
-        ax = fig.add_subplot(4, 1, i + 1)
-        y = np.asarray(tab[name], dtype=float)
+        ax = axes[i]
+        y = _continuous_deg(tab[name])
         for m in np.unique(method):
             sel = method == m
             if m != "none":
@@ -151,17 +167,19 @@ def figures(result: TaskResult, params: Params) -> dict[str, Figure]:
         ax.grid(alpha=0.3)
         if i == 0:
             ax.legend(fontsize=7, markerscale=4, loc="upper right")
-    ax = fig.add_subplot(4, 1, 4)
+    ax = axes[3]
     kinds = ["q_method", "quest", "svd", "esoq2", "loosely_coupled", "none"]
     present = [k for k in kinds if np.any(method == k)]
     for j, k in enumerate(present):
         sel = method == k
         ax.plot(x[sel], np.full(int(sel.sum()), j), "|", color=METHOD_COLORS.get(k, "k"), ms=8)
     ax.set_yticks(range(len(present)), present)
+    ax.set_ylim(-0.6, len(present) - 0.4)
+    ax.set_ylabel("algorithm\n(002 fig. 1)", fontsize=8)
     ax.set_xlabel("time since the first epoch [min]")
-    ax.set_title("algorithm per epoch (002 figure 1)", fontsize=9)
     out = {"attitude": fig}
-    fig2 = Figure(figsize=(10, 4), label="Residuals of the vector observations and the 99 % error bound")
+    fig2 = Figure(figsize=(10, 4), layout="constrained",
+                  label="Residuals of the vector observations and the 99 % error bound")
     ax = fig2.add_subplot()
     for v, c in zip(VECTORS, ("tab:green", "tab:blue", "tab:orange"), strict=True):
         y = np.asarray(tab[f"residual_{v}_deg"], dtype=float)
@@ -186,4 +204,9 @@ JOB = JobType(
                 "navigation satellites, eqs. 5-7), the magnetometer against IGRF-14 and the sun vector from the "
                 "panel currents; strongly coupled Wahba solution (eqs. 8-9) with three vectors, loosely coupled "
                 "scheme (eqs. 10-14) with magnetometer + antenna, chosen per epoch (figure 1).",
+    headline=(*(Answer(f"{a}_deg.mean", f"{a.capitalize()}, mean over the window", sigma=f"{a}_deg.std",
+                       sigma_label="std", frame="body B in the orbital frame O of 002")
+                for a in ("pitch", "yaw", "roll")),
+              Answer("bound99_deg_median", "99 % attitude error bound (median)", unit="deg"),
+              Answer("availability", "Epochs with an attitude", unit="%", scale=100.0)),
 )

@@ -56,4 +56,10 @@
   }
 
   document.addEventListener("DOMContentLoaded", function () { window.setTimeout(poll, INTERVAL_MS); });
+
+  // Forms that destroy something ask first (data-confirm="question").
+  document.addEventListener("submit", function (e) {
+    var question = e.target.getAttribute && e.target.getAttribute("data-confirm");
+    if (question && !window.confirm(question)) { e.preventDefault(); }
+  });
 })();
