@@ -16,6 +16,7 @@ from fastapi.testclient import TestClient
 from sqlalchemy import create_engine, text
 from sqlalchemy.engine import make_url
 
+from app.jobs.executor import start_forkserver
 from app.main import create_app
 from app.settings import Settings
 
@@ -24,6 +25,14 @@ ADMIN_TOKEN = "test-admin-token-0123456789"
 
 BACKENDS = ["sqlite", pytest.param("postgresql", marks=pytest.mark.skipif(
     not PG_URL, reason="ATTITUDE_TEST_DATABASE_URL not set"))]
+
+
+@pytest.fixture(scope="session", autouse=True)
+def job_forkserver() -> None:
+    """One forkserver for the job processes of every service a test process starts in-process, started
+    from the main thread: started from a TestClient's thread it would die with that client, and each
+    test's service would pay the job types' import again (app.jobs.executor.start_forkserver)."""
+    start_forkserver()
 
 
 @pytest.fixture(params=BACKENDS)

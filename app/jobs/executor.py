@@ -10,6 +10,7 @@ Running jobs whose heartbeat stopped (their service died) are failed by the peri
 from __future__ import annotations
 
 import multiprocessing as mp
+import multiprocessing.forkserver
 import os
 import time
 from dataclasses import dataclass, field
@@ -27,6 +28,26 @@ from storage.jobs import ArtifactStore
 from storage.models import Job
 
 
+FORKSERVER_PRELOAD = ["app.jobs.forkserver_guard", "app.jobs.worker", "app.jobs.preload"]
+
+
+def start_forkserver() -> None:
+    """Start the job processes' forkserver now, from the calling thread (no-op while one is running).
+
+    The forkserver imports every job type (several seconds of CPU) while the service goes on. Linux's
+    parent-death signal (app.jobs.lifetime) follows the *thread* that started the forkserver: the service
+    calls this from the thread that runs its lifespan, and a host that runs several services in one
+    process (the test suite) from its main thread, so that one forkserver serves them all.
+    """
+    # One BLAS thread per job process: jobs already run side by side (max_jobs), and oversubscribed
+    # OpenBLAS threads made small QR factorisations 5-10x slower on a busy 2-core machine.
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    os.environ[SERVICE_PID_VARIABLE] = str(os.getpid())  # the forkserver dies with this process
+    mp.get_context("forkserver").set_forkserver_preload(FORKSERVER_PRELOAD)
+    multiprocessing.forkserver.ensure_running()
+
+
 @dataclass
 class _Running:
     process: BaseProcess
@@ -38,13 +59,10 @@ class _Running:
 class LocalExecutor(CatalogDispatcher[_Running]):
     def __init__(self, settings: Settings, sessions: sessionmaker[Session], poll_s: float = 0.25) -> None:
         super().__init__(settings, sessions, poll_s)
-        # One BLAS thread per job process: jobs already run side by side (max_jobs), and oversubscribed
-        # OpenBLAS threads made small QR factorisations 5-10x slower on a busy 2-core machine.
-        os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-        os.environ.setdefault("OMP_NUM_THREADS", "1")
-        os.environ[SERVICE_PID_VARIABLE] = str(os.getpid())  # the forkserver dies with this process
         self._ctx = mp.get_context("forkserver")
-        self._ctx.set_forkserver_preload(["app.jobs.forkserver_guard", "app.jobs.worker", "app.jobs.preload"])
+
+    def _connect(self) -> None:
+        start_forkserver()  # preloading while the service starts; a running forkserver is kept
 
     def _launch(self, job_id: str) -> None:
         proc = self._ctx.Process(target=worker.run, args=(job_id, self.settings, os.getpid()), name=f"job-{job_id}",

@@ -21,6 +21,7 @@ from matplotlib.figure import Figure
 from pydantic import BaseModel, ConfigDict, Field
 
 from app.jobs.registry import JobType
+from app.reports.headline import Answer
 from app.reports.sections import ReportContext, ReportSection, ReportTable
 from processing.definitive.comparison import compare_alignment, compare_gyro_bias_fit
 from processing.definitive.estimate import DefinitiveResult, estimate_definitive_attitude
@@ -423,6 +424,12 @@ JOB = JobType(
     name="definitive_attitude", title="Definitive attitude over a whole arc (MEKF + RTS smoother)", paper="",
     params=Params, run=run, streams=("star_tracker",), optional_streams=("gyro", "gyro_increments"),
     figures=figures, report_sections=report_sections,
+    headline=(Answer("attitude_sigma_arcsec.median", "Smoothed attitude 1σ, median over the arc", unit="arcsec",
+                     frame="body (B), about its axes"),
+              Answer("gyro_bias_rad_s", "Gyro bias b, arc mean (w_meas = w + b)", sigma="gyro_bias_sigma_rad_s",
+                     frame="body (B)"),
+              Answer("gyro_bias_change_rad_s", "Gyro bias change over the arc", frame="body (B)"),
+              Answer("nis.mean", "Star-tracker NIS, mean (expected: its dof)", unit="")),
     description="Smoothed attitude q_IB with per-axis 1-sigma from every star-tracker head and the gyros (rates or "
                 "increments): a multiplicative EKF and Rauch-Tung-Striebel smoother with the gyro bias as a random "
                 "walk and optional scale factors, misalignment/non-orthogonality (Pittelkau), further heads' "

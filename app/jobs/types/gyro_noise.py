@@ -27,6 +27,7 @@ from matplotlib.figure import Figure
 from pydantic import BaseModel, ConfigDict, Field
 
 from app.jobs.registry import JobType
+from app.reports.headline import Answer
 from processing.attitude import rotations
 from processing.definitive.estimate import estimate_definitive_attitude
 from processing.definitive.gyro import refine
@@ -180,6 +181,10 @@ JOB = JobType(
     name="gyro_noise", title="Gyro noise: Allan deviation, ARW, bias instability, RRW", paper="",
     params=Params, run=run, streams=(), optional_streams=("gyro", "gyro_increments", "star_tracker"),
     figures=figures,
+    headline=(Answer("angle_random_walk_deg_sqrt_h", "Angle random walk N", unit="deg/√h", frame="gyro (G)"),
+              Answer("bias_instability_deg_h", "Bias instability B", unit="deg/h", frame="gyro (G)"),
+              Answer("rate_random_walk_rad_s_sqrt_s", "Rate random walk K", unit="rad/s/√s", frame="gyro (G)"),
+              Answer("angle_white_noise_rad", "Angle white noise Q", unit="rad", frame="gyro (G)")),
     description="Overlapping Allan deviation (allantools) of the gyro rates of a quiet arc, or of the gyro against "
                 "the star tracker after the definitive attitude, with angle random walk, bias instability and rate "
                 "random walk (IEEE Std 952) and their 95 % confidence intervals.",
