@@ -64,3 +64,32 @@ def client(settings: Settings) -> Iterator[TestClient]:
     with TestClient(create_app(settings)) as c:
         c.headers["Authorization"] = f"Bearer {ADMIN_TOKEN}"
         yield c
+
+
+FIRST = ("tests/app/test_crash_safety.py", "tests/app/test_dask_executor.py", "tests/app/test_schemathesis.py",
+         "tests/web/test_ui.py", "tests/app/test_reports.py", "tests/storage/test_concurrent_ingest.py",
+         "tests/app/test_schedules.py")
+"""Files that mostly wait (real server processes, clusters, browsers) or build large worlds: scheduled first,
+so that under ``--dist loadfile`` they do not end the run alone on one worker while the other idles."""
+
+
+def pytest_collection_modifyitems(session: pytest.Session, config: pytest.Config, items: list[pytest.Item]) -> None:
+    rank = {path: i for i, path in enumerate(FIRST)}
+    root = Path(str(config.rootpath))
+
+    def key(item: pytest.Item) -> int:
+        try:
+            rel = Path(str(item.path)).relative_to(root).as_posix()
+        except ValueError:
+            return len(FIRST)
+        return rank.get(rel, len(FIRST))
+
+    items.sort(key=key)  # stable: the order within a file and among the others is kept
+    # ``@pytest.mark.sqlite_only``: the PostgreSQL variant of such a test is deselected
+    pg_only_copies = [item for item in items if item.get_closest_marker("sqlite_only") is not None
+                      and getattr(item, "callspec", None) is not None
+                      and item.callspec.params.get("database_url") == "postgresql"]
+    if pg_only_copies:
+        config.hook.pytest_deselected(items=pg_only_copies)
+        drop = set(map(id, pg_only_copies))
+        items[:] = [item for item in items if id(item) not in drop]

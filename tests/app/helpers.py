@@ -10,7 +10,12 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
+import pytest
 from fastapi.testclient import TestClient
+
+SQLITE_ONLY = pytest.mark.sqlite_only
+"""For tests whose subject does not touch what differs between catalog backends (numerics, formats, pages):
+PostgreSQL runs the storage, ingest, job-claiming, access, schedule and crash tests (tests/conftest.py)."""
 
 CSV = {"Content-Type": "text/csv"}
 PARQUET = {"Content-Type": "application/vnd.apache.parquet"}

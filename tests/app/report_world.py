@@ -8,8 +8,11 @@ are covered as soon as they are registered.
 
 from __future__ import annotations
 
+import fcntl
+import json
 import os
 import shutil
+import types
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
@@ -105,6 +108,61 @@ def assign(job_types: Iterable[JobType], worlds: dict[str, Any]) -> tuple[dict[s
             skipped[jt.name] = (f"needs {', '.join(jt.streams)}, which no simulated spacecraft "
                                 f"({', '.join(worlds)}) provides")
     return where, skipped
+
+
+WORLD_ADMIN = "report-world-admin-token-0123456789"
+
+
+def _build_world(data_dir: Path) -> dict[str, dict[str, Any]]:
+    """Upload every scenario into a service on ``data_dir`` (SQLite catalog inside it) and run every job type
+    once on its spacecraft; returns {job type: the finished job as the API shows it}."""
+    from fastapi.testclient import TestClient
+
+    from app.main import create_app
+    from app.settings import Settings
+    from tests.app.test_jobs_api import upload_columns, wait
+
+    settings = Settings(data_dir=data_dir, database_url=f"sqlite:///{data_dir / 'catalog.db'}",
+                        bootstrap_token=WORLD_ADMIN, max_jobs=2)
+    worlds = scenarios()
+    with TestClient(create_app(settings)) as client:
+        client.headers["Authorization"] = f"Bearer {WORLD_ADMIN}"
+        for sc, sim in worlds.items():
+            r = client.post("/api/v1/spacecraft", json={"name": sc, "config": config_with_specs(sim.config)})
+            assert r.status_code == 201, r.text
+            for stream, columns in sim.streams.items():
+                upload_columns(client, sc, stream, columns)
+        where, _ = assign(registry().values(), worlds)
+        ids = {}
+        for name, sc in where.items():
+            r = client.post("/api/v1/jobs", json={"type": name, "spacecraft": sc})
+            assert r.status_code == 202, (name, r.text)
+            ids[name] = r.json()["id"]
+        return {name: wait(client, job_id, timeout_s=900) for name, job_id in ids.items()}
+
+
+def report_world(tmp_path_factory: Any, name: str) -> types.SimpleNamespace:
+    """A private copy of the report world: ``data_dir`` (catalog ``data_dir/catalog.db``), ``jobs``,
+    ``worlds`` (the scenarios), ``where``/``skipped`` (:func:`assign`), ``sim`` (the seed-003 one).
+
+    The world is built once per test run and copied for each caller: under pytest-xdist the workers share
+    it through a directory beside their base temporary directories, built by the first under a file lock
+    (the report tests and the browser tests both need it, and it costs tens of seconds of CPU)."""
+    run = os.environ.get("PYTEST_XDIST_TESTRUNUID")
+    base = Path(tmp_path_factory.getbasetemp())
+    cache = base.parent / f"report-world-{run}" if run else base / "report-world"
+    with open(f"{cache}.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if not (cache / "jobs.json").exists():
+            shutil.rmtree(cache, ignore_errors=True)
+            jobs = _build_world(cache / "data")
+            (cache / "jobs.json").write_text(json.dumps(jobs))
+    dest = Path(tmp_path_factory.mktemp(name)) / "data"
+    shutil.copytree(cache / "data", dest)
+    worlds = scenarios()
+    where, skipped = assign(registry().values(), worlds)
+    return types.SimpleNamespace(data_dir=dest, jobs=json.loads((cache / "jobs.json").read_text()), worlds=worlds,
+                                 where=where, skipped=skipped, sim=worlds[SPACECRAFT])
 
 
 def all_type_names() -> list[str]:

@@ -1,11 +1,12 @@
 """Crash safety of the real server: concurrent uploads and jobs, SIGKILL at random moments, restart.
 
 Each cycle SIGKILLs the service process alone (not its process group): its forkserver and job workers
-must die with it. After the cycles: every upload acknowledged with 201 is fully readable, no upload is
-partly visible, every catalogued file exists and reads, no unreferenced file is left on disk, and no job
-stays queued or running. The number of cycles is
-ATTITUDE_CRASH_CYCLES (default 12 on SQLite, 6 on PostgreSQL, to keep CI within its budget; set it higher
-for a soak run).
+must die with it. Even cycles kill the service early (its first job submission still importing the job
+types, the forkserver still preloading them), odd ones once a job was submitted. After the cycles: every
+upload acknowledged with 201 is fully readable, no upload is partly visible, every catalogued file exists
+and reads, no unreferenced file is left on disk, and no job stays queued or running. The number of cycles
+is ATTITUDE_CRASH_CYCLES (default 8 on SQLite, 4 on PostgreSQL, to keep CI within its budget; set it
+higher for a soak run, e.g. 30).
 """
 
 from __future__ import annotations
@@ -35,7 +36,7 @@ ROWS = 300
 pytestmark = pytest.mark.slow
 
 
-def request(base, method, path, body=None, content_type=None, timeout=10):
+def request(base, method, path, body=None, content_type=None, timeout=10.0):
     headers = {"Authorization": f"Bearer {TOKEN}"}
     if content_type:
         headers["Content-Type"] = content_type
@@ -119,7 +120,7 @@ def rows_of(base, batch):
 
 
 def test_sigkill_during_uploads_and_jobs(tmp_path: Path, database_url: str):
-    cycles = int(os.environ.get("ATTITUDE_CRASH_CYCLES", "12" if database_url.startswith("sqlite") else "6"))
+    cycles = int(os.environ.get("ATTITUDE_CRASH_CYCLES", "8" if database_url.startswith("sqlite") else "4"))
     env = {"ATTITUDE_DATA_DIR": str(tmp_path / "data"), "ATTITUDE_DATABASE_URL": database_url,
            "ATTITUDE_BOOTSTRAP_TOKEN": TOKEN, "ATTITUDE_JOB_HEARTBEAT_TIMEOUT_S": "2", "ATTITUDE_MAX_JOBS": "2",
            "ATTITUDE_RATE_LIMIT_PER_MINUTE": "1000000"}
@@ -158,16 +159,26 @@ def test_sigkill_during_uploads_and_jobs(tmp_path: Path, database_url: str):
                     except (OSError, http.client.HTTPException):
                         return
 
-            threads = [threading.Thread(target=uploader) for _ in range(3)] + [threading.Thread(target=reader)]
+            submitted = threading.Event()
+
+            def submitter(base: str = base, submitted: threading.Event = submitted) -> None:
+                try:
+                    request(base, "POST", "/api/v1/jobs", json.dumps(
+                        {"type": "executor_check", "spacecraft": "sat", "params": {"duration_s": 0.3}}).encode(),
+                        "application/json", timeout=60)
+                except (OSError, http.client.HTTPException):
+                    return
+                submitted.set()
+
+            threads = [threading.Thread(target=uploader) for _ in range(3)]
+            threads += [threading.Thread(target=reader), threading.Thread(target=submitter)]
             for t in threads:
                 t.start()
-            try:
-                request(base, "POST", "/api/v1/jobs", json.dumps(
-                    {"type": "executor_check", "spacecraft": "sat", "params": {"duration_s": 0.3}}).encode(),
-                    "application/json")
-            except (OSError, http.client.HTTPException):
-                pass
-            time.sleep(rng.uniform(0.05, 1.0))
+            if cycle % 2:  # a job submitted (its worker starting or running) when the service dies
+                submitted.wait(60)
+                time.sleep(rng.uniform(0.05, 1.0))
+            else:  # early: the service's first job submission and the forkserver's preload still under way
+                time.sleep(rng.uniform(0.2, 2.0))
             below = descendants(proc.pid)  # the forkserver and any running job worker
             os.kill(proc.pid, signal.SIGKILL)  # the service alone: its workers must follow it
             proc.wait()

@@ -16,8 +16,10 @@ from processing.frames.earth_orientation import gcrs_to_itrs_state
 from processing.orbits.two_body import circular_orbit_state
 from processing.time import timescales
 from processing.units import R_EARTH_M
-from tests.app.helpers import make_spacecraft, upload
+from tests.app.helpers import SQLITE_ONLY, make_spacecraft, upload
 from tests.conftest import ADMIN_TOKEN
+
+pytestmark = SQLITE_ONLY
 
 T0 = int(timescales.iso_to_tai_ns(["2023-06-01T00:00:00Z"])[0])
 NS = 1_000_000_000

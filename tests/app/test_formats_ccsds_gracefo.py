@@ -13,8 +13,10 @@ from processing.frames.earth_orientation import gcrs_to_inertial_mat, gcrs_to_it
 from processing.orbits.two_body import circular_orbit_state
 from processing.time import timescales
 from processing.units import R_EARTH_M
-from tests.app.helpers import make_spacecraft, upload
+from tests.app.helpers import SQLITE_ONLY, make_spacecraft, upload
 from tests.real_data import GRACEFO, REFERENCE
+
+pytestmark = SQLITE_ONLY
 
 TEXT = {"Content-Type": "text/plain"}
 CREATED = dt.datetime(2023, 6, 1, tzinfo=dt.UTC)

@@ -19,7 +19,9 @@ from processing.tasks import TaskError, TaskInputs, TaskResult
 from storage.calibrations import add_version
 from storage.db import make_engine, session_factory
 from storage.models import Job
-from tests.app.helpers import make_spacecraft
+from tests.app.helpers import SQLITE_ONLY, make_spacecraft
+
+pytestmark = SQLITE_ONLY
 
 S = 2 ** -0.5
 CONFIG = {

@@ -19,8 +19,10 @@ from processing.tasks import ReferenceData, TaskError, TaskInputs, no_progress
 from processing.time import timescales
 from storage.models import Spacecraft
 from storage.telemetry import read_window
-from tests.app.helpers import make_spacecraft, upload
+from tests.app.helpers import SQLITE_ONLY, make_spacecraft, upload
 from tests.real_data import GRACEFO
+
+pytestmark = SQLITE_ONLY
 
 START = int(timescales.iso_to_tai_ns(["2023-06-01T00:00:00Z"])[0])
 NS = 1_000_000_000

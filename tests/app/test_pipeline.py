@@ -18,6 +18,9 @@ from processing.simulate.seed003 import simulate_seed003
 from processing.spacecraft import Spacecraft
 from processing.tasks import TaskError, TaskInputs, TaskResult
 from processing.time import timescales
+from tests.app.helpers import SQLITE_ONLY
+
+pytestmark = SQLITE_ONLY
 
 START = int(timescales.iso_to_tai_ns(["2023-06-01T00:00:00Z"])[0])
 

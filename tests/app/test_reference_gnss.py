@@ -10,7 +10,10 @@ import pyarrow.parquet as pq
 from processing.formats.ccsds_odm import oem_segment, write_oem
 from processing.orbits.gnss_ephemeris import satellite_positions_E
 from processing.time import timescales
+from tests.app.helpers import SQLITE_ONLY
 from tests.real_data import GNSS_NAV
+
+pytestmark = SQLITE_ONLY
 
 NAV_DIR = GNSS_NAV
 

@@ -30,18 +30,16 @@ from app.reports import job_report, sections, specs, summary, trends
 from app.settings import Settings
 from tests.app.figure_geometry import problems as figure_problems
 from tests.app.report_world import (
-    SPACECRAFT,
     SPECIFICATIONS,
     all_type_names,
-    assign,
     config_with_specs,
     missing_tools,
     output_dir,
     png_ink_fraction,
-    scenarios,
+    report_world,
     strip_volatile,
 )
-from tests.app.test_jobs_api import upload_columns, wait
+from tests.app.test_jobs_api import wait
 
 ADMIN = "reports-admin-token-0123456789"
 TIMINGS: dict[str, dict[str, float]] = {}
@@ -50,26 +48,13 @@ BLANK = 2e-5  # share of inked pixels at or below which a page counts as blank (
 
 @pytest.fixture(scope="module")
 def world(tmp_path_factory: pytest.TempPathFactory):
-    root = tmp_path_factory.mktemp("reports")
-    settings = Settings(data_dir=root / "data", database_url=f"sqlite:///{root / 'catalog.db'}",
+    shared = report_world(tmp_path_factory, "reports")
+    settings = Settings(data_dir=shared.data_dir, database_url=f"sqlite:///{shared.data_dir / 'catalog.db'}",
                         bootstrap_token=ADMIN, max_jobs=2)
-    worlds = scenarios()
     with TestClient(create_app(settings)) as client:
         client.headers["Authorization"] = f"Bearer {ADMIN}"
-        for sc, sim in worlds.items():
-            r = client.post("/api/v1/spacecraft", json={"name": sc, "config": config_with_specs(sim.config)})
-            assert r.status_code == 201, r.text
-            for stream, columns in sim.streams.items():
-                upload_columns(client, sc, stream, columns)
-        where, skipped = assign(registry().values(), worlds)
-        ids = {}
-        for name, sc in where.items():
-            r = client.post("/api/v1/jobs", json={"type": name, "spacecraft": sc})
-            assert r.status_code == 202, (name, r.text)
-            ids[name] = r.json()["id"]
-        jobs = {name: wait(client, job_id, timeout_s=900) for name, job_id in ids.items()}
-        yield types.SimpleNamespace(client=client, jobs=jobs, skipped=skipped, sim=worlds[SPACECRAFT],
-                                    where=where, settings=settings, worlds=worlds)
+        yield types.SimpleNamespace(client=client, jobs=shared.jobs, skipped=shared.skipped, sim=shared.sim,
+                                    where=shared.where, settings=settings, worlds=shared.worlds)
     lines = [f"{k:<28} " + "  ".join(f"{m} {v:6.2f} s" for m, v in sorted(t.items()))
              for k, t in sorted(TIMINGS.items())]
     (output_dir("reports") / "timings.txt").write_text("\n".join(lines) + "\n")

@@ -6,8 +6,11 @@ import pytest
 
 from processing.formats.rinex_nav import parse_rinex_nav_reference
 from processing.simulate.seed002 import simulate_seed002
+from tests.app.helpers import SQLITE_ONLY
 from tests.app.test_jobs_api import upload_columns, wait
 from tests.real_data import GNSS_NAV
+
+pytestmark = SQLITE_ONLY
 
 NAV = GNSS_NAV / "brdc2800.15n"
 

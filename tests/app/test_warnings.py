@@ -10,7 +10,9 @@ import pytest
 
 from app.cli_remote import _job_outcome
 from processing.tasks import WARNING_CODES, ResultWarning
-from tests.app.helpers import make_spacecraft
+from tests.app.helpers import SQLITE_ONLY, make_spacecraft
+
+pytestmark = SQLITE_ONLY
 
 
 def _run(client, params: dict) -> dict:

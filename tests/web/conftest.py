@@ -20,16 +20,13 @@ import pytest
 
 from app.client import ApiClient
 from app.devserver import running_server
-from app.jobs.registry import registry
 from tests.app.report_world import (
     DURATION_S,
     SPACECRAFT,
     START,
-    assign,
-    config_with_specs,
     missing_tools,
     output_dir,
-    scenarios,
+    report_world,
 )
 
 CHROMIUM_FLAGS = ("--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
@@ -50,31 +47,25 @@ def browser_tools() -> None:
 @pytest.fixture(scope="module")
 def service(tmp_path_factory: pytest.TempPathFactory, browser_tools: None) -> Iterator[types.SimpleNamespace]:
     """One server for the module: a simulated spacecraft with every job type run once, keys of each role."""
-    root = tmp_path_factory.mktemp("web")
+    shared = report_world(tmp_path_factory, "web")
+    root = shared.data_dir.parent
     token = "web-admin-" + secrets.token_urlsafe(12)
-    env = {"ATTITUDE_DATA_DIR": str(root / "data"), "ATTITUDE_BOOTSTRAP_TOKEN": token, "ATTITUDE_DATABASE_URL": "",
-           "ATTITUDE_MAX_JOBS": "2", "ATTITUDE_SCHEDULER": "0"}
-    worlds = scenarios()
+    env = {"ATTITUDE_DATA_DIR": str(shared.data_dir), "ATTITUDE_BOOTSTRAP_TOKEN": token,
+           "ATTITUDE_DATABASE_URL": "", "ATTITUDE_MAX_JOBS": "2", "ATTITUDE_SCHEDULER": "0"}
     with running_server(env, log_path=root / "server.log") as base:
         api = ApiClient(base, token)
-        for sc, sim in worlds.items():
-            api.post("/api/v1/spacecraft", {"name": sc, "config": config_with_specs(sim.config)})
-            for stream, columns in sim.streams.items():
-                api.upload_columns(sc, stream, columns)
         api.post("/api/v1/spacecraft", {"name": UPLOAD_TARGET, "config": {}})
-        where, _ = assign(registry().values(), worlds)
-        jobs = {name: api.post("/api/v1/jobs", {"type": name, "spacecraft": sc})["id"] for name, sc in where.items()}
         thirds = [START + int(i * DURATION_S / 3 * 1e9) for i in range(4)]
         trend_jobs = [api.post("/api/v1/jobs", {"type": "telemetry_coverage", "spacecraft": SPACECRAFT,
                                                 "start": a / 1e9, "end": b / 1e9, "time_scale": "tai"})["id"]
                       for a, b in zip(thirds, thirds[1:], strict=False)]
-        finished = {name: api.wait_for_job(job_id, timeout_s=900) for name, job_id in jobs.items()}
+        finished = shared.jobs
         for job_id in trend_jobs:
             assert api.wait_for_job(job_id, timeout_s=300)["status"] == "succeeded"
         keys = {role: api.post("/api/v1/keys", {"name": f"web-{role}", "role": role})["secret"]
                 for role in ("viewer", "operator")}
         yield types.SimpleNamespace(base=base, api=api, admin=token, keys=keys, jobs=finished,
-                                    sim=worlds[SPACECRAFT], spacecraft=sorted([*worlds, UPLOAD_TARGET]), root=root)
+                                    sim=shared.sim, spacecraft=sorted([*shared.worlds, UPLOAD_TARGET]), root=root)
 
 
 @pytest.fixture(scope="module")

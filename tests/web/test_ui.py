@@ -206,9 +206,10 @@ def test_report_page_of_every_job_type(browser, service, job_type):
     rerun = browser.find_element(By.ID, "rerun-link").get_attribute("href")
     browser.find_element(By.LINK_TEXT, "← Job").click()  # the report's own CSP allows no fetch(): go back
     wait_for(browser, lambda d: d.current_url.endswith(f"/ui/jobs/{job['id']}"))
-    pdf = fetch(browser, f"/ui/jobs/{job['id']}/report.pdf")
-    assert pdf["status"] == 200 and pdf["type"] == "application/pdf" and pdf["head"].startswith("%PDF-")
-    assert pdf["size"] > 10_000
+    if job_type == "star_tracker_accuracy":  # the download with the session; every type's PDF: test_reports
+        pdf = fetch(browser, f"/ui/jobs/{job['id']}/report.pdf")
+        assert pdf["status"] == 200 and pdf["type"] == "application/pdf" and pdf["head"].startswith("%PDF-")
+        assert pdf["size"] > 10_000
     for href in downloads[:2]:  # table downloads work with the session
         got = fetch(browser, href)
         assert got["status"] == 200 and got["disposition"].startswith("attachment"), got

@@ -11,9 +11,11 @@ from __future__ import annotations
 import pytest
 
 from app.web.auth import COOKIE, csrf_token
-from tests.app.helpers import issue_keys, make_spacecraft, run_coverage_jobs, upload
+from tests.app.helpers import SQLITE_ONLY, issue_keys, make_spacecraft, run_coverage_jobs, upload
 from tests.app.test_access_control import app_routes
 from tests.web.access_table import JSON_ROUTES, PUBLIC, WEB_ACCESS
+
+pytestmark = SQLITE_ONLY
 
 GYRO_CSV = "time,wx,wy,wz\n2023-06-01T00:00:00Z,1,2,3\n2023-06-01T00:00:01Z,1,2,3\n"
 LOWER = {"viewer": None, "operator": "viewer", "admin": "operator"}
