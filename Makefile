@@ -40,8 +40,14 @@ lint: $(DEV)
 # Test files are spread over TEST_WORKERS processes (a file stays on one worker: module fixtures are built once).
 TEST_WORKERS ?= 2
 
-test: lint
-	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 $(BIN)/python -m pytest -n $(TEST_WORKERS) --dist loadfile
+# ruff first (a second); mypy (about a minute of CPU) runs beside the suite, whose workers often wait on
+# servers and browsers; the target fails when either fails.
+test: $(DEV)
+	$(BIN)/ruff check .
+	@$(BIN)/mypy app storage processing > $(VENV)/mypy.log 2>&1 & mypy=$$!; \
+	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 $(BIN)/python -m pytest -n $(TEST_WORKERS) --dist loadfile; tests=$$?; \
+	wait $$mypy; types=$$?; echo "mypy app storage processing:"; cat $(VENV)/mypy.log; \
+	test $$tests -eq 0 -a $$types -eq 0
 
 demo: $(RUNTIME)
 	$(BIN)/python -m app.demo
