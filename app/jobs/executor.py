@@ -27,7 +27,6 @@ from storage import jobs as jobstore
 from storage.jobs import ArtifactStore
 from storage.models import Job
 
-
 FORKSERVER_PRELOAD = ["app.jobs.forkserver_guard", "app.jobs.worker", "app.jobs.preload"]
 
 

@@ -27,7 +27,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.stats import chi2
 
 from processing.attitude import rotations
 from processing.definitive.filter import FilterModel, ForwardRun, Measurements, run_filter
@@ -43,6 +42,7 @@ from processing.definitive.model import (
 from processing.definitive.observability import Observability, observability
 from processing.definitive.propagation import Blocks, block_quantities
 from processing.definitive.smoother import SmoothedRun, rts_smooth
+from processing.estimation.chi2 import chi2_isf
 from processing.estimation.consistency import ChiSquareStats, WhitenessStats, chi_square_stats, whiteness
 from processing.gyro_calibration.bias_fit import estimate_gyro_arw
 from processing.units import NS_PER_S
@@ -195,7 +195,7 @@ def _run_pass(pb: _Problem, ref: _Reference, r_var: FloatArray, s: DefinitiveSet
                               lay.calibration)
     k_ref = ref.p0[3:3 + lay.n_cal]
     pref = np.concatenate([blocks.b_ref, np.broadcast_to(k_ref, (blocks.b_ref.shape[0], lay.n_cal))], axis=1)
-    gate = float(chi2.isf(s.gate_probability, 3)) if gating and s.gate_probability > 0 else 0.0
+    gate = float(chi2_isf(s.gate_probability, 3)) if gating and s.gate_probability > 0 else 0.0
     model = FilterModel(layout=lay, q_BS=pb.q_BS, r_var=r_var, p_ref_bk=pref, p0=ref.p0,
                         P0=np.diag(pb.prior**2), gate=gate)
     run = run_filter(blocks, pb.meas, model)

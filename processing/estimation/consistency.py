@@ -3,13 +3,13 @@ Kirubarajan, Estimation with Applications to Tracking and Navigation, 2001, §5.
 
 - NIS (normalised innovation squared) per update, nu^T S^-1 nu, is chi^2 with m degrees of freedom
   (m = measurement dimension) when the filter is consistent; its time average over N updates lies
-  in [chi2.ppf(0.025, sum m) / N, chi2.ppf(0.975, sum m) / N] with 95 % probability.
+  in [chi2_ppf(0.025, sum m) / N, chi2_ppf(0.975, sum m) / N] with 95 % probability.
 - Whiteness: the whitened innovations (L^-1 nu, S = L L^T) are independent N(0, 1); their sample
   autocorrelation at lag l != 0 is within +-1.96 / sqrt(N) with 95 % probability.
 - NEES (normalised estimation error squared) e^T P^-1 e, chi^2 with n degrees of freedom, needs the
   truth (simulations). A single run's errors are correlated in time, so its per-step values are
   judged by the fraction inside the per-step 95 % interval (~95 % expected) and its mean by
-  [chi2.ppf(0.025, n), chi2.ppf(0.975, n)] loosely; Monte-Carlo averages give the sharp test.
+  [chi2_ppf(0.025, n), chi2_ppf(0.975, n)] loosely; Monte-Carlo averages give the sharp test.
 """
 
 from __future__ import annotations
@@ -18,7 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.stats import chi2
+
+from processing.estimation.chi2 import chi2_ppf
 
 __all__ = ["ChiSquareStats", "WhitenessStats", "chi_square_stats", "nees", "whiteness"]
 
@@ -46,8 +47,8 @@ def chi_square_stats(values: ArrayLike, dof: ArrayLike) -> ChiSquareStats:
     if v.size == 0:
         return ChiSquareStats(0, float("nan"), float("nan"), (float("nan"), float("nan")), float("nan"), False)
     total = float(d.sum())
-    lo, hi = chi2.ppf(0.025, total) / v.size, chi2.ppf(0.975, total) / v.size
-    inside = (v >= chi2.ppf(0.025, d)) & (v <= chi2.ppf(0.975, d))
+    lo, hi = chi2_ppf(0.025, total) / v.size, chi2_ppf(0.975, total) / v.size
+    inside = (v >= chi2_ppf(0.025, d)) & (v <= chi2_ppf(0.975, d))
     mean = float(v.mean())
     return ChiSquareStats(n=int(v.size), mean=mean, mean_dof=float(d.mean()), mean_bounds=(float(lo), float(hi)),
                           fraction_in_95=float(inside.mean()), mean_in_bounds=bool(lo <= mean <= hi))

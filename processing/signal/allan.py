@@ -24,11 +24,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import allantools
 import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import nnls
-from scipy.stats import chi2
+
+from processing.estimation.chi2 import chi2_ppf
 
 FloatArray = NDArray[np.float64]
 
@@ -105,6 +105,8 @@ def allan_deviation(data: FloatArray, rate_hz: float, kind: str = "rates") -> Al
         raise AllanError(f"need (N, k) data with N >= 12 and a positive rate, got {x.shape} at {rate_hz} Hz")
     if kind not in ("rates", "angles"):
         raise AllanError(f"kind must be 'rates' or 'angles', got {kind!r}")
+    import allantools  # here, not at import: it pulls scipy.signal and scipy.stats (~2.5 s into every job process)
+
     taus = _octave_taus(x.shape[0], rate_hz)
     adev = np.full((taus.size, x.shape[1]), np.nan)
     counts = np.zeros(taus.size)
@@ -130,6 +132,8 @@ def allan_deviation(data: FloatArray, rate_hz: float, kind: str = "rates") -> Al
 
 def _edf(taus: FloatArray, rate_hz: float, n_points: int, alpha: NDArray[np.int_]) -> FloatArray:
     """Greenhall's edf of the overlapping Allan variance at each tau for the noise exponent alpha (T, k)."""
+    import allantools
+
     out = np.empty(alpha.shape)
     for i, tau in enumerate(taus):
         m = max(int(round(tau * rate_hz)), 1)
@@ -144,8 +148,8 @@ def _edf(taus: FloatArray, rate_hz: float, n_points: int, alpha: NDArray[np.int_
 
 def _bounds(adev: FloatArray, edf: FloatArray) -> tuple[FloatArray, FloatArray]:
     """95 % bounds of a deviation with edf degrees of freedom (NIST SP 1065 eq. 36)."""
-    lo = adev * np.sqrt(edf / chi2.ppf(0.975, edf))
-    hi = adev * np.sqrt(edf / chi2.ppf(0.025, edf))
+    lo = adev * np.sqrt(edf / chi2_ppf(0.975, edf))
+    hi = adev * np.sqrt(edf / chi2_ppf(0.025, edf))
     return lo, hi
 
 

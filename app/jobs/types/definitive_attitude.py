@@ -34,6 +34,7 @@ from processing.definitive.model import (
     misalignment_jacobian,
     misalignment_parts,
 )
+from processing.estimation.chi2 import chi2_ppf
 from processing.formats.ccsds_adm import aem_segment, write_aem
 from processing.tasks import Progress, ResultWarning, TaskError, TaskInputs, TaskResult
 from processing.units import ARCSEC_PER_RAD, NS_PER_S, RAD_PER_ARCSEC
@@ -356,9 +357,8 @@ def _fig_consistency(result: TaskResult) -> Figure:
     ax1, ax2 = fig.subplots(2, 1)
     ok = np.isfinite(nis)
     ax1.semilogy(t[ok], nis[ok], ".", ms=1.2, color="0.5", label="NIS per head measurement")
-    from scipy.stats import chi2
 
-    ax1.axhline(chi2.ppf(0.975, 3), color="tab:red", lw=0.8, label="95 % (3 dof)")
+    ax1.axhline(chi2_ppf(0.975, 3), color="tab:red", lw=0.8, label="95 % (3 dof)")
     ax1.axhline(3.0, color="k", lw=0.8, label="dof")
     ax1.set_xlabel("time since the first sample [s]")
     ax1.legend(loc="upper right", fontsize=8)
