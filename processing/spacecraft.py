@@ -24,7 +24,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from processing.attitude.rotations import quat_canonical
-from processing.tasks import TaskError
+from processing.errors import TaskError
 
 IDENTITY_QUATERNION = (1.0, 0.0, 0.0, 0.0)
 UNIT_TOLERANCE = 1e-6

@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 import numpy as np
 from numpy.typing import NDArray
 
+from processing.errors import TaskError
 from processing.samples import (
     GnssSamples,
     GnssVisibilitySamples,
@@ -32,18 +33,12 @@ from processing.samples import (
     SunSensorSamples,
 )
 
-if TYPE_CHECKING:  # processing.spacecraft imports TaskError from here
+if TYPE_CHECKING:
     from processing.spacecraft import Spacecraft
 
 Columns = Mapping[str, NDArray[Any]]
 Progress = Callable[[float, str], None]
 V = TypeVar("V", bound=Samples)
-
-
-class TaskError(ValueError):
-    """The inputs or parameters do not allow the computation; the message says what and why.
-
-    The one deliberate input error: the runner records its message as the job's failure reason."""
 
 
 def no_progress(fraction: float, stage: str) -> None:
