@@ -181,7 +181,8 @@ def _times(col: pa.ChunkedArray, scale: str, errors: _Errors) -> np.ndarray:
 def _zoned_rows(col: pa.ChunkedArray, scale: str, raw: np.ndarray, errors: _Errors) -> bool:
     """Report ISO times with an explicit zone ('Z', '+02:00') uploaded with a time_scale other than utc: a
     zone makes a time UTC (local time minus the offset), so reading it on another scale would silently move
-    the sample by that scale's offset (19 s for GPS, 37 s for TAI in 2017-). True when any was found."""
+    the sample by that scale's offset (since 2017: 18 s for GPS, 37 s for TAI, 69.184 s for TT). True when any
+    was found."""
     zoned = pc.match_substring_regex(col, ZONED_TIME).fill_null(False).to_numpy(zero_copy_only=False)
     rows = np.flatnonzero(zoned)
     if rows.size == 0:
