@@ -25,9 +25,14 @@ Steps of :func:`check_star_tracker_gyro`:
 
 1. Conventions. Each of the eight combinations of {order as given, scalar last} x {q_IS, q_SI} x
    {q_BS, q_SB} is fitted with (c, tau) (tau on a grid over +-max_time_offset_s) on at most
-   ``CANDIDATE_INTERVALS`` intervals, and scored by the weighted residual sum of squares with common
-   per-axis weights. The best one is the data's convention when the next best (among candidates that are
-   not the same rotation) fits at least ``CONVENTION_RATIO_MIN`` times worse: ``convention_determined``.
+   ``CANDIDATE_INTERVALS`` intervals, and scored by the generalised variance of its residuals,
+   det(sum e e^T / P) (the Gaussian likelihood with a free 3x3 noise covariance, log L = -P/2 log det + const:
+   made for the anisotropic star-tracker noise whatever axes a reading turns it into, and unchanged when a
+   reading merely rotates the noise, so that no reading wins on noise alone, e.g. without motion). When the
+   reading as given scores at least ``CONVENTION_RATIO_MIN`` times worse than the best one, the best one is
+   reported (``quaternion_convention``), with the readings the data cannot tell from it (within that factor:
+   e.g. the transposed mounting when q_BS is close to its own transpose).
+   ``convention_determined``: every reading that is not the same rotation scores that much worse.
    Rates that hardly change (a constant rate about a fixed axis, an inertial hold) cannot tell some
    conventions apart: a wrong one then differs by a constant rate that a gyro offset absorbs.
 2. Time offset. On the best convention, Gauss-Newton on (c, K, tau), K with a Gaussian prior of
@@ -90,8 +95,8 @@ def _finite(x: float) -> float | None:
 
 
 CONVENTION_RATIO_MIN = 4.0
-"""A convention is the data's when every other (different) one leaves a residual sum of squares at least
-this many times larger."""
+"""Another reading is reported when the one given leaves a generalised residual variance this many times
+larger (a log-likelihood ratio of P/2 log 4 = 0.7 P for P intervals: never reached by noise)."""
 CONSISTENCY_MAX = 4.0
 """Residual mean square per axis above this many times the expected noise (rms 2x) is implausible."""
 CALIBRATION_PRIOR = 0.01
@@ -152,9 +157,9 @@ def apply_convention(q_IS: ArrayLike, q_BS: ArrayLike, convention: Convention) -
 
 @dataclass(frozen=True)
 class ConventionFit:
-    """A tested convention: the weighted residual sum of squares per interval relative to the best one's
-    (``fit_ratio`` = 1 for the best), its residual rms per sensor axis (rad per interval), the time offset
-    and gyro offset (gyro frame) it would imply."""
+    """A tested convention: its generalised residual variance relative to the best one's (``fit_ratio`` = 1
+    for the best), its residual rms per sensor axis (rad per interval), the time offset and gyro offset (gyro
+    frame) it would imply."""
 
     convention: Convention
     fit_ratio: float
@@ -345,7 +350,7 @@ def _residual(gyro: _Gyro, iv: _Intervals, cand: _Candidate, tau: float) -> tupl
 
 
 def _profile(e: FloatArray, dt: FloatArray, weights: FloatArray) -> tuple[float, FloatArray, FloatArray]:
-    """Weighted residual sum of squares after the offset fit e ~ c dt (per axis), c (3,), residuals."""
+    """Weighted residual sum of squares after the offset fit e ~ c dt (per axis), c (3,), residuals (P, 3)."""
     c = (dt @ e) / (dt @ dt)
     r = e - dt[:, None] * c
     return float(np.sum(r * r * weights)), c, r
@@ -383,30 +388,27 @@ def _grid_residuals(gyro: _Gyro, iv: _Intervals, cands: list[_Candidate], taus: 
     return out
 
 
-def _grid_fits(e_all: list[FloatArray], cands: list[_Candidate], iv: _Intervals, taus: FloatArray,
-               weights: FloatArray) -> list[tuple[_Candidate, float, float, FloatArray, FloatArray]]:
-    """Per candidate (candidate, least weighted SS over the tau grid, its tau, c (3,), residuals (P, 3))."""
+def _grid_fits(e_all: list[FloatArray], cands: list[_Candidate], iv: _Intervals,
+               taus: FloatArray) -> list[tuple[_Candidate, float, float, FloatArray, FloatArray]]:
+    """Per candidate (candidate, score, its tau, c (3,), residuals (P, 3)), the score the least over the tau
+    grid of the generalised variance det(R^T R / P) of the residuals after the offset fit."""
     dt = iv.dt
     out = []
     for cand, e in zip(cands, e_all, strict=True):
         c = np.einsum("n,gni->gi", dt, e) / (dt @ dt)
         r = e - dt[None, :, None] * c[:, None, :]
-        ss = np.einsum("gni,i->g", r * r, weights)
-        j = int(np.argmin(ss))
-        out.append((cand, float(ss[j]), float(taus[j]), c[j], r[j]))
+        score = np.maximum(np.linalg.det(np.einsum("gni,gnj->gij", r, r) / dt.size), 0.0)
+        j = int(np.argmin(score))
+        out.append((cand, float(score[j]), float(taus[j]), c[j], r[j]))
     return out
 
 
 def _rank(gyro: _Gyro, iv: _Intervals, cands: list[_Candidate],
           taus: FloatArray) -> tuple[list[tuple[_Candidate, float, float, FloatArray, FloatArray]], bool]:
-    """Every candidate's grid fit, best first, with common weights from the as-given one and then from the
-    best one; and whether the best is determined (the next different one is CONVENTION_RATIO_MIN worse)."""
+    """Every candidate's grid fit, best first (generalised residual variance), and whether the best is
+    determined (every different one is CONVENTION_RATIO_MIN worse)."""
     e_all = _grid_residuals(gyro, iv, cands, taus)
-    weights = np.ones(3)
-    fits: list[tuple[_Candidate, float, float, FloatArray, FloatArray]] = []
-    for _ in range(2):
-        fits = sorted(_grid_fits(e_all, cands, iv, taus, weights), key=lambda f: f[1])
-        weights = 1.0 / np.maximum(np.mean(fits[0][4] ** 2, axis=0), 1e-30)
+    fits = sorted(_grid_fits(e_all, cands, iv, taus), key=lambda f: f[1])
     best = fits[0]
     scale = max(best[1], 1e-300)
     # a candidate that is the same rotation as the best (e.g. a mounting equal to its own transpose, or no
@@ -571,7 +573,7 @@ def check_star_tracker_gyro(
     fits, determined = _rank(gyro, iv_c, _candidates(q, m_bs, m_bg, iv_c), taus)
     best = fits[0]
     given_ratio = next(f[1] for f in fits if f[0].convention.name == "as_given") / max(best[1], 1e-300)
-    switch = best[0].convention.name != "as_given" and determined
+    switch = best[0].convention.name != "as_given" and given_ratio >= CONVENTION_RATIO_MIN
     chosen = best[0].convention if switch else CONVENTIONS[0]
     tau0 = best[2] if switch else next(f[2] for f in fits if f[0].convention.name == "as_given")
 
@@ -646,9 +648,15 @@ def _warnings(res: PlausibilityResult, sensor: str, switch: bool, given_ratio: f
     if switch:
         conv = res.candidates[0].convention
         quat_fix = conv.scalar_last or conv.inverse
+        # readings the rates cannot tell from the best (not those that are the same rotation: a mounting equal
+        # to its own transpose)
+        near = [c for c in res.candidates[1:] if 1.0 + 1e-9 < c.fit_ratio < CONVENTION_RATIO_MIN]
+        alike = [c.convention.name for c in near]
+        also = (f" (these rates cannot tell it from {', '.join(alike)}, which fit"
+                f" {', '.join(f'{c.fit_ratio:.3g}' for c in near)} times worse)" if near else "")
         out.append(ResultWarning(
             "quaternion_convention",
-            f"{sensor}: the star-tracker quaternions agree with the gyro only as {conv.name} (the data as given "
+            f"{sensor}: the star-tracker quaternions agree with the gyro only as {conv.name}{also} (the data as given "
             f"fit {given_ratio:.3g} times worse, residual rms {np.round(given.residual_rms_rad * a, 1).tolist()} "
             f"arcsec per interval against {np.round(res.candidates[0].residual_rms_rad * a, 1).tolist()}): "
             + _repair(conv, sensor)
@@ -656,7 +664,7 @@ def _warnings(res: PlausibilityResult, sensor: str, switch: bool, given_ratio: f
             {"sensor": sensor, "convention": conv.name, "fit_ratio_as_given": given_ratio,
              "residual_rms_as_given_arcsec": [float(x) for x in given.residual_rms_rad * a],
              "residual_rms_arcsec": [float(x) for x in res.candidates[0].residual_rms_rad * a],
-             "candidates": {c.convention.name: c.fit_ratio for c in res.candidates}},
+             "alike": alike, "candidates": {c.convention.name: c.fit_ratio for c in res.candidates}},
         ))
     if np.max(res.consistency_ratio) > CONSISTENCY_MAX:
         out.append(ResultWarning(

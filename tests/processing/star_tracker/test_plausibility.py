@@ -151,6 +151,26 @@ def test_a_wrong_convention_is_named_with_its_repair(name: str, fix_fragment: st
             * Rotation.from_quat(sc.truth.q_BS, scalar_first=True)).magnitude() < 1e-12
 
 
+def test_scalar_last_is_named_when_the_mounting_is_nearly_its_own_transpose() -> None:
+    """With q_BS a 2-degree rotation, q_SB differs from it by 4 degrees, which an Earth-pointing arc can hardly
+    tell (a constant rate turns a mounting error into a rate offset): the scalar-last reading is still named,
+    with the transposed mounting as the reading the rates cannot tell from it."""
+    sc = simulate(11)
+    q_BS = rot.quat_from_axis_angle([0.2, 1.0, -0.4], 2.0 * RAD_PER_DEG)
+    # the same sensor-to-gyro rotation q_SG = q_BS^-1 o q_BG as the simulation, in another body frame
+    q_BG = rot.quat_multiply(q_BS, rot.quat_multiply(rot.quat_conjugate(sc.truth.q_BS), sc.truth.q_BG))
+    st, g = sc.streams["star_tracker"], sc.streams["gyro"]
+    q = rot.quat_canonical(Rotation.from_quat(stored_q(sc), scalar_first=True).as_quat(scalar_first=False))
+    w = np.column_stack([g["wx"], g["wy"], g["wz"]])
+    clean = check_star_tracker_gyro(st["time_tai_ns"], stored_q(sc), q_BS, g["time_tai_ns"], w, q_BG)
+    assert clean.warnings == [] and clean.convention == "as_given"
+    r = check_star_tracker_gyro(st["time_tai_ns"], q, q_BS, g["time_tai_ns"], w, q_BG, sensor="st1")
+    assert r.convention.startswith("scalar_last")
+    (cw,) = [x for x in r.warnings if x.code == "quaternion_convention"]
+    assert cw.evidence["fit_ratio_as_given"] > 10 and "qx, qy, qz, qw" in cw.message
+    assert {r.convention, *cw.evidence["alike"]} >= {"scalar_last", "scalar_last+transposed_mounting"}
+
+
 def test_as_given_data_fitting_badly_under_every_convention_are_implausible() -> None:
     sc = simulate(8)
     g = sc.streams["gyro"]
