@@ -684,8 +684,10 @@ def _warnings(res: PlausibilityResult, sensor: str, switch: bool, given_ratio: f
         if abs(res.time_offset_s) > max(3.0 * res.time_offset_sigma_s, TIME_OFFSET_MIN_S):
             out.append(ResultWarning(
                 "time_offset",
-                f"{sensor}: the star-tracker samples were taken {1e3 * res.time_offset_s:.1f} ± "
-                f"{1e3 * res.time_offset_sigma_s:.1f} ms after their time tags, on the gyro's clock (true time = "
+                f"{sensor}: the star-tracker samples were taken {1e3 * abs(res.time_offset_s):.1f} ± "
+                f"{1e3 * res.time_offset_sigma_s:.1f} ms {'after' if res.time_offset_s > 0 else 'before'} their "
+                "time tags, on the gyro's clock (time_offset_s "
+                f"{res.time_offset_s:+.4f} s; true time = "
                 "tag + time_offset_s): correct the time tags, or let the job estimate the offset (gyro_bias_fit: "
                 "fit_time_offset; definitive_attitude: estimate_time_offset)",
                 {"sensor": sensor, "time_offset_s": res.time_offset_s, "sigma_s": res.time_offset_sigma_s,

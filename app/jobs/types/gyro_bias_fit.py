@@ -265,6 +265,10 @@ def _shift_gyro(win: _Window, params: Params, plaus: dict[str, PlausibilityResul
     if not isinstance(ref, PlausibilityResult) or ref.time_offset_s is None:
         notes.append("fit_time_offset: the time offset is not determined by these data; gyro times not corrected")
         return win, None
+    if ref.convention != "as_given":
+        notes.append(f"fit_time_offset: the quaternions fit the gyro only as {ref.convention}; gyro times not "
+                     "corrected (re-upload them first)")
+        return win, None
     tau = ref.time_offset_s
     t_g_ns = win.t_g_ns - int(round(tau * NS_PER_S))
     keep = (win.t_st_ns >= t_g_ns[0]) & (win.t_st_ns <= t_g_ns[-1])
@@ -389,10 +393,11 @@ def _warnings(r: _Outcome) -> list[ResultWarning]:
             continue
         for w in res.warnings:
             if w.code == "time_offset" and name == r.window.names[0] and r.time_offset_applied_s is not None:
-                w = ResultWarning(w.code, f"{name}: the star-tracker samples were taken "
-                                  f"{1e3 * r.time_offset_applied_s:.1f} ± {1e3 * (res.time_offset_sigma_s or 0.0):.1f} "
-                                  "ms after their time tags, on the gyro's clock; the gyro times were corrected by it "
-                                  "before the fit (fit_time_offset): correct the time tags at the source",
+                tau = r.time_offset_applied_s
+                w = ResultWarning(w.code, f"{name}: the star-tracker samples were taken {1e3 * abs(tau):.1f} ± "
+                                  f"{1e3 * (res.time_offset_sigma_s or 0.0):.1f} ms {'after' if tau > 0 else 'before'} "
+                                  "their time tags, on the gyro's clock; the gyro times were corrected by it before "
+                                  "the fit (fit_time_offset): correct the time tags at the source",
                                   {**w.evidence, "corrected": True})
             out.append(w)
     if isinstance(ref, PlausibilityResult):
