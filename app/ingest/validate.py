@@ -25,6 +25,9 @@ from processing.time import timescales
 from storage.telemetry import arrow_schema
 
 SENSOR_NAME = re.compile(r"^[A-Za-z0-9_.\-]{1,64}$")
+ZONED_TIME = r"\d{2}:\d{2}:\d{2}(?:[.,]\d+)?\s*(?:[Zz]|[+-]\d{2}(?::?\d{2})?)\s*$"
+"""An ISO 8601 time that ends in a zone designator ('Z', '+HH', '+HHMM', '+HH:MM' or '-'): a UTC time."""
+UTC_ZONES = ("UTC", "utc", "Z", "+00:00", "Etc/UTC")
 QUATERNION_ALIASES = {"qw": "q0", "qx": "q1", "qy": "q2", "qz": "q3"}
 DIRECTIONS = ("sensor_to_inertial", "inertial_to_sensor")
 
@@ -144,10 +147,12 @@ def _times(col: pa.ChunkedArray, scale: str, errors: _Errors) -> np.ndarray:
         return np.zeros(n, dtype=np.int64)
     try:
         if pa.types.is_timestamp(t):
-            if t.tz not in (None, "UTC", "utc", "Z", "+00:00", "Etc/UTC"):
-                if scale != "utc":
-                    errors.add(None, "time", f"timestamps with time zone {t.tz} need time_scale=utc")
-                    return np.zeros(n, dtype=np.int64)
+            if t.tz is not None and scale != "utc":
+                errors.add(None, "time", f"timestamps with time zone {t.tz} are UTC times, but time_scale={scale} "
+                                         f"reads the times as {scale} readings: upload naive timestamps (no time "
+                                         f"zone) read on {scale}, or use time_scale=utc")
+                return np.zeros(n, dtype=np.int64)
+            if t.tz not in (None, *UTC_ZONES):
                 col = pc.cast(col, pa.timestamp("ns", tz="UTC"))
             ns = pc.cast(col, pa.timestamp("ns", tz=t.tz)).cast(pa.int64()).to_numpy(zero_copy_only=False)
             return timescales.epoch_ns_to_tai_ns(ns, scale)
@@ -159,6 +164,8 @@ def _times(col: pa.ChunkedArray, scale: str, errors: _Errors) -> np.ndarray:
             try:  # numbers written as text (CSV): seconds since 1970 on the scale
                 seconds = pc.cast(col, pa.float64()).to_numpy(zero_copy_only=False)
             except pa.ArrowInvalid:
+                if scale != "utc" and _zoned_rows(col, scale, raw, errors):
+                    return np.zeros(n, dtype=np.int64)
                 return timescales.iso_to_tai_ns(raw, scale)
             return timescales.seconds_to_tai_ns(seconds, scale)
     except timescales.TimeValueError as exc:
@@ -169,6 +176,21 @@ def _times(col: pa.ChunkedArray, scale: str, errors: _Errors) -> np.ndarray:
         return np.zeros(n, dtype=np.int64)
     errors.add(None, "time", f"expected ISO 8601 strings, numbers or timestamps, got type {t}")
     return np.zeros(n, dtype=np.int64)
+
+
+def _zoned_rows(col: pa.ChunkedArray, scale: str, raw: np.ndarray, errors: _Errors) -> bool:
+    """Report ISO times with an explicit zone ('Z', '+02:00') uploaded with a time_scale other than utc: a
+    zone makes a time UTC (local time minus the offset), so reading it on another scale would silently move
+    the sample by that scale's offset (since 2017: 18 s for GPS, 37 s for TAI, 69.184 s for TT). True when any
+    was found."""
+    zoned = pc.match_substring_regex(col, ZONED_TIME).fill_null(False).to_numpy(zero_copy_only=False)
+    rows = np.flatnonzero(zoned)
+    if rows.size == 0:
+        return False
+    errors.add_rows(rows, "time", f"has an explicit time zone, which makes it a UTC time, but time_scale={scale} "
+                                  f"reads the times as {scale} readings: remove the zone ('Z', '+HH:MM') to give "
+                                  f"{scale} readings, or upload with time_scale=utc", raw)
+    return True
 
 
 def _resolve_columns(table: pa.Table, spec: StreamSpec, errors: _Errors) -> dict[str, str]:

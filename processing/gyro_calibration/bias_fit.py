@@ -22,6 +22,13 @@ Honest covariance (beyond 003): the sandwich with the integrated gyro noise of a
 axis (processing.gyro_calibration.bias_fit_covariance); N is given, or estimated from the gyro rates
 (:func:`estimate_gyro_arw`).
 
+Residual consistency (beyond 003): Gauss-Newton converging says nothing about whether the model fits. Per
+tracker and sensor axis the residual mean square is compared with what the noise explains: the star-tracker
+variance from the differences of consecutive residuals (E (e_{n+1} - e_n)² = 2 sigma_st² + N² dt, which a
+smooth systematic misfit hardly raises) times (1 - P/3M), plus the expected gyro-noise part. A ratio above
+``RESIDUAL_CONSISTENCY_MAX`` (residual rms twice the noise) leaves ``converged`` false with the reason in
+``status`` (wrong quaternion convention or mounting, a time-tag offset, offsets that drift).
+
 Mounting (beyond 003, which found it "gave clearly wrong Q" on short arcs): optionally three more
 parameters mu, a small rotation of the gyro axes, q_RG' = exp(mu) o q_RG. mu only enters through
 mu x Omega, so on a near-constant rate (Earth pointing) it is indistinguishable from Delta (and its
@@ -73,6 +80,10 @@ MOUNTING_SIGMA_MAX_RAD = 60.0 * RAD_PER_ARCSEC
 """A mounting estimate is reported only when every component's honest sigma is below this (1 arcmin)."""
 MOUNTING_CONDITION_MAX = 1e12
 """... and the correlation-scaled normal matrix is better conditioned than this."""
+RESIDUAL_CONSISTENCY_MAX = 4.0
+"""Residual mean square over the one the noise explains, above which the fit is not converged (rms 2x)."""
+RESIDUAL_FLOOR_RAD = 1e-3 * RAD_PER_ARCSEC
+"""Added in quadrature to both sides of that ratio, so that noise-free data (truncation errors only) pass."""
 
 FloatArray = NDArray[np.float64]
 PARAMETER_NAMES = ("z1", "z2", "z3", "delta1", "delta2", "delta3")
@@ -121,7 +132,9 @@ class GyroBiasFit:
     n_samples (S,); residual_rms_rad (S, 3); residual_rms_gyro_rad (S, 3): expected contribution of the
     integrated gyro noise to those rms; star_tracker_sigma_rad (S, 3): noise of each tracker with that
     contribution removed; gyro_arw_rad_sqrt_s (3,) per gyro axis, used for the honest covariance;
-    iterations, converged, status; condition_number of the scaled normal matrix;
+    iterations; converged: Gauss-Newton converged AND the residuals are consistent with the noise; status
+    says why not; residual_consistency (S, 3): residual mean square over the one the noise explains (module
+    docstring; ~1 when the model fits); condition_number of the scaled normal matrix;
     mounting: :class:`MountingEstimate` when it was asked for, else None.
     """
 
@@ -151,6 +164,7 @@ class GyroBiasFit:
     status: str
     condition_number: float
     mounting: MountingEstimate | None
+    residual_consistency: FloatArray
 
     @property
     def delta_sigma_R_rad_s(self) -> FloatArray:
@@ -415,6 +429,17 @@ def _fit_result(
     st, order, sens = gn.state, prep.order, prep.sens
     inverse = np.empty_like(order)
     inverse[order] = np.arange(order.size)
+    consistency = _residual_consistency(prep, 2.0 * st.ev.a, cov, arw)
+    converged, status = gn.converged, gn.status
+    if converged and np.max(consistency) > RESIDUAL_CONSISTENCY_MAX:
+        worst = np.unravel_index(int(np.argmax(consistency)), consistency.shape)
+        converged = False
+        status = (
+            f"not converged: Gauss-Newton converged, but the residual mean square is {float(np.max(consistency)):.3g} "
+            f"times what the star-tracker and gyro noise explain (tracker {int(worst[0])}, axis x{int(worst[1]) + 1}; "
+            f"at most {RESIDUAL_CONSISTENCY_MAX:g}): the model does not fit (a wrong quaternion convention or "
+            "mounting, a time-tag offset, or offsets that drift)"
+        )
     return GyroBiasFit(
         t0_s=prep.t0,
         q_IR0=rotations.quat_canonical(rotations.mrp_to_quat(st.z)),
@@ -438,8 +463,35 @@ def _fit_result(
         star_tracker_sigma_rad=cov.st_sigma,
         gyro_arw_rad_sqrt_s=arw,
         iterations=gn.iterations,
-        converged=gn.converged,
-        status=gn.status,
+        converged=converged,
+        status=status,
         condition_number=cov.condition_number,
         mounting=mounting,
+        residual_consistency=consistency,
     )
+
+
+def _residual_consistency(prep: _Prepared, e: FloatArray, cov: _Covariance, arw: FloatArray) -> FloatArray:
+    """(S, 3) residual mean square over sigma_st² (1 - P/3M) + the expected gyro part, sigma_st² from the
+    differences of consecutive residuals of each tracker (module docstring). e (M, 3) in time order."""
+    pb = prep.pb
+    n_par = 9 if pb.mounting else 6
+    dof = max(1.0 - n_par / (3.0 * pb.t_st.size), 1e-3)
+    r_rg = rotations.quat_to_dcm(cov.q_rg)
+    out = np.ones((prep.n_sensors, 3))
+    for j in range(prep.n_sensors):
+        idx = np.flatnonzero(prep.sens == j)
+        if idx.size < 4:
+            continue
+        t, ej = pb.t_st[idx], e[idx]
+        dt = np.diff(t)
+        keep = (dt > 0) & (dt <= 1.5 * float(np.median(dt)))
+        if np.count_nonzero(keep) < 3:
+            continue
+        r_sg = rotations.quat_to_dcm(rotations.quat_conjugate(pb.q_RS[idx[0]])) @ r_rg
+        arw_S2 = np.einsum("ij,j,ij->i", r_sg, arw**2, r_sg)
+        d = np.diff(ej, axis=0)[keep]
+        var_st = np.maximum(np.mean(d * d, axis=0) - arw_S2 * float(np.mean(dt[keep])), 0.0) / 2.0
+        expected = var_st * dof + cov.rms_gyro[j] ** 2
+        out[j] = (np.mean(ej * ej, axis=0) + RESIDUAL_FLOOR_RAD**2) / (expected + RESIDUAL_FLOOR_RAD**2)
+    return out

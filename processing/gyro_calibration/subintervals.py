@@ -1,5 +1,17 @@
 """Gyro offsets on sub-intervals (003 §2.4, figs. 15-16): the fit of processing.gyro_calibration.bias_fit
-repeated on halves, quarters and sliding windows, to see whether the offsets drift.
+repeated on halves, quarters and sliding windows, to see whether the offsets drift, and the test of
+constancy that makes the whole window's covariance honest when they do.
+
+Constancy (beyond 003 §2.4, which plots the sub-interval offsets): K disjoint sub-intervals give independent
+estimates Delta_k with honest covariances P_k (disjoint star-tracker samples, disjoint stretches of gyro
+noise). Under constant offsets Q = sum_k (Delta_k - Delta_w)^T P_k^-1 (Delta_k - Delta_w), Delta_w the
+inverse-covariance weighted mean, is chi-square with 3 (K - 1) degrees of freedom. When p < alpha the
+offsets changed within the window: the whole window's estimate is then an average of a changing offset, and
+its covariance must carry the change. Per axis i the between-sub-interval variance is the random-effects
+(DerSimonian-Laird) tau_i² = max(0, (Q_i - (K - 1)) / (sum w - sum w² / sum w)), w = 1 / P_k,ii, the
+excess scatter of the sub-interval estimates over their own sigmas; the reported variance of the whole
+window's offset becomes sigma_i² + tau_i² (the error of estimating the window's mean offset is of the size of
+the offset's variation within the window, whatever the estimator's own noise).
 
 Times float64 seconds from any epoch; quaternions scalar first.
 """
@@ -7,13 +19,18 @@ Times float64 seconds from any epoch; quaternions scalar first.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from scipy.stats import chi2 as chi2_dist
 
 from processing.gyro_calibration.bias_fit import GyroBiasFit, GyroBiasFitError, fit_gyro_bias
 
-__all__ = ["fit_subintervals", "subinterval_edges"]
+__all__ = ["ConstancyTest", "fit_subintervals", "offset_constancy", "subinterval_edges"]
+
+CONSTANCY_ALPHA = 0.01
+"""Significance level of the constancy test (the false-alarm rate on constant offsets)."""
 
 FloatArray = NDArray[np.float64]
 
@@ -83,3 +100,71 @@ def fit_subintervals(
             )
         )
     return out
+
+
+@dataclass(frozen=True)
+class ConstancyTest:
+    """Result of :func:`offset_constancy` (module docstring). Offsets Delta in the reference frame R, rad/s.
+
+    parts: K sub-intervals used; chi2, dof = 3 (K - 1), p_value; constant: p_value >= alpha;
+    estimates (K, 3) and sigmas (K, 3) of the sub-intervals; weighted_mean (3,); chi2_axis (3,) the per-axis
+    parts Q_i; between_sigma_rad_s (3,) tau_i (0 when constant); sigma_rad_s (3,) the whole window's sigma to
+    report: sqrt(sigma_i² + tau_i²) (the fit's own when constant); covariance (3, 3) likewise (the fit's own
+    plus diag(tau²)); inflation (3,) the ratio of the two sigmas.
+    """
+
+    parts: int
+    chi2: float
+    dof: int
+    p_value: float
+    alpha: float
+    constant: bool
+    estimates: FloatArray
+    sigmas: FloatArray
+    weighted_mean: FloatArray
+    chi2_axis: FloatArray
+    between_sigma_rad_s: FloatArray
+    sigma_rad_s: FloatArray
+    covariance: FloatArray
+    inflation: FloatArray
+
+
+def offset_constancy(
+    whole: GyroBiasFit, subs: Sequence[GyroBiasFit | None], *, alpha: float = CONSTANCY_ALPHA
+) -> ConstancyTest | None:
+    """Test the constancy of the offsets across the disjoint sub-interval fits ``subs`` of ``whole``.
+
+    subs: the K fits of one split into K equal parts (None entries, too short to fit, are left out); at least
+    2 fits are needed (else None). Returns :class:`ConstancyTest`; the whole window's covariance is inflated
+    only when the test fails (p < alpha).
+    """
+    fits = [f for f in subs if f is not None]
+    if len(fits) < 2:
+        return None
+    if not 0.0 < alpha < 1.0:
+        raise GyroBiasFitError(f"alpha must be in (0, 1), got {alpha!r}")
+    est = np.array([f.delta_R_rad_s for f in fits])
+    covs = np.array([f.delta_covariance_R for f in fits])
+    infos = np.linalg.inv(covs)
+    mean = np.linalg.solve(infos.sum(axis=0), np.einsum("kij,kj->i", infos, est))
+    dev = est - mean
+    q = float(np.einsum("ki,kij,kj->", dev, infos, dev))
+    k = len(fits)
+    dof = 3 * (k - 1)
+    p_value = float(chi2_dist.sf(q, dof))
+    constant = p_value >= alpha
+    # per-axis random-effects variance of the offset across the window (DerSimonian-Laird)
+    var = np.einsum("kii->ki", covs)
+    w = 1.0 / var
+    mean_axis = np.sum(w * est, axis=0) / np.sum(w, axis=0)
+    q_axis = np.sum(w * (est - mean_axis) ** 2, axis=0)
+    denom = np.sum(w, axis=0) - np.sum(w * w, axis=0) / np.sum(w, axis=0)
+    tau2 = np.maximum((q_axis - (k - 1)) / denom, 0.0) if not constant else np.zeros(3)
+    base = whole.delta_covariance_R
+    cov = base + np.diag(tau2)
+    sigma = np.sqrt(np.diag(cov))
+    return ConstancyTest(
+        parts=k, chi2=q, dof=dof, p_value=p_value, alpha=alpha, constant=constant, estimates=est,
+        sigmas=np.sqrt(var), weighted_mean=mean, chi2_axis=q_axis, between_sigma_rad_s=np.sqrt(tau2),
+        sigma_rad_s=sigma, covariance=cov, inflation=sigma / np.sqrt(np.diag(base)),
+    )

@@ -304,3 +304,42 @@ def test_json_records_wrapped(client):
     r = client.post("/api/v1/spacecraft/sat1/telemetry/gyro", content=body,
                     headers={"Content-Type": "application/json"})
     assert r.status_code == 201
+
+
+@pytest.mark.parametrize(("scale", "zoned"), [("tai", "2023-06-01T00:00:01Z"), ("gps", "2023-06-01T02:00:01+02:00"),
+                                              ("tt", "2023-06-01T02:00:01.5+0200"), ("tai", "2023-05-31T19:00:01-05")])
+def test_explicit_zone_with_another_time_scale_is_refused(client, settings, scale, zoned):
+    """A 'Z' or '+HH:MM' makes a time UTC; reading it as a TAI/GPS/TT reading would move the row by 37/18/69 s."""
+    make_spacecraft(client)
+    csv = f"time,wx,wy,wz\n2023-06-01T00:00:00,1,2,3\n{zoned},1,2,3\n"
+    r = upload(client, "gyro", csv, time_scale=scale)
+    assert r.status_code == 422, r.text
+    errors = r.json()["errors"]
+    assert [(e["row"], e["column"]) for e in errors] == [(1, "time")]  # row 0 has no zone: a reading on the scale
+    assert "explicit time zone" in errors[0]["message"] and f"time_scale={scale}" in errors[0]["message"]
+    assert zoned in errors[0]["message"] and "time_scale=utc" in errors[0]["message"]
+    assert_nothing_stored(client, settings)
+
+
+def test_zoned_times_are_utc_and_naive_times_read_on_the_scale(client):
+    make_spacecraft(client)
+    assert upload(client, "gyro", "time,wx,wy,wz\n2023-06-01T02:00:00+02:00,1,2,3\n").status_code == 201  # utc
+    assert upload(client, "gyro", "time,wx,wy,wz\n2023-06-01T00:00:37,1,2,3\n", time_scale="tai").status_code == 201
+    rows = client.get("/api/v1/spacecraft/sat1/telemetry/gyro?format=json").json()
+    # TAI - UTC = 37 s in 2023 (IERS Bulletin C): the TAI reading 00:00:37 is 00:00:00 UTC, the same instant,
+    # so the second upload is a duplicate sample; before the fix a zoned time with time_scale=tai moved by 37 s
+    assert [r["time"] for r in rows] == ["2023-06-01T00:00:00Z"]
+
+
+def test_zoned_timestamps_with_another_time_scale_are_refused(client, settings):
+    make_spacecraft(client)
+    table = pa.table({"time": pa.array([1_685_577_600_000_000_000], pa.timestamp("ns", tz="UTC")),
+                      "wx": [1.0], "wy": [2.0], "wz": [3.0]})
+    r = upload(client, "gyro", parquet_bytes(table), PARQUET, time_scale="gps")
+    assert r.status_code == 422, r.text
+    (err,) = r.json()["errors"]
+    assert err["row"] is None and err["column"] == "time"
+    assert "time zone UTC" in err["message"] and "time_scale=gps" in err["message"] and "naive" in err["message"]
+    assert_nothing_stored(client, settings)
+    naive = table.set_column(0, "time", pa.array([1_685_577_600_000_000_000], pa.timestamp("ns")))
+    assert upload(client, "gyro", parquet_bytes(naive), PARQUET, time_scale="gps").status_code == 201

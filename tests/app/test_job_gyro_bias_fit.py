@@ -73,6 +73,15 @@ def test_summary_keys_types_and_truth(default_result: tuple[Scenario003, TaskRes
     np.testing.assert_allclose(rot.quat_to_mrp(s["initial_q_IS"]), s["initial_mrp"], atol=1e-12)
     assert len(s["covariance"]) == 6 and len(s["covariance"][0]) == 6
     assert set(s["sensors"]) == {"st1"}
+    # clean data: no warning; the time offset is determined (and ~0), the offsets pass the constancy test
+    assert result.warnings == [] and s["quaternion_convention"] == "as_given"
+    assert s["time_offset_observable"] is True and s["time_offset_corrected_s"] is None
+    assert abs(s["time_offset_s"]) < 3 * s["time_offset_sigma_s"] < 0.1
+    c = s["offset_constancy"]
+    assert c["constant"] is True and c["parts"] == 4 and c["dof"] == 9 and c["inflation"] == [1.0, 1.0, 1.0]
+    assert s["gyro_bias_sigma_rad_s"] == s["gyro_bias_sigma_constant_rad_s"]
+    assert max(s["residual_consistency"]) < 2.0 and s["status"] == "converged"
+    assert s["sensors"]["st1"]["plausibility"]["convention"] == "as_given"
 
 
 def test_subintervals_halves_and_quarters(default_result: tuple[Scenario003, TaskResult]) -> None:
@@ -202,3 +211,62 @@ def test_progress_is_reported() -> None:
     JOB.run(inputs(sc), JOB.params(subintervals=[2]), lambda f, s: seen.append((f, s)))
     fractions = [f for f, _ in seen]
     assert fractions[0] == 0.0 and fractions[-1] == 1.0 and fractions == sorted(fractions)
+
+
+def _with_star_tracker(sc: Scenario003, q: np.ndarray | None = None, shift_ns: int = 0) -> dict[str, Any]:
+    st = dict(sc.streams["star_tracker"])
+    if q is not None:
+        st.update({f"q{i}": q[:, i].copy() for i in range(4)})
+    st["time_tai_ns"] = st["time_tai_ns"] + shift_ns
+    return {**sc.streams, "star_tracker": st}
+
+
+def test_scalar_last_quaternions_are_named_and_not_converged() -> None:
+    """The reviewer's case: (x, y, z, w) uploaded under q0..q3 headers. Gauss-Newton converges on nonsense (biases
+    of tens of deg/h, residuals of hundreds of arcsec); the job says which convention fits and that it did not."""
+    sc = scenario(7)
+    st = sc.streams["star_tracker"]
+    q = rot.quat_canonical(np.column_stack([st[f"q{i}"] for i in (1, 2, 3, 0)]))
+    result = JOB.run(inputs(sc, _with_star_tracker(sc, q)), JOB.params(), no_progress)
+    s = result.summary
+    assert s["converged"] is False and s["quaternion_convention"] == "scalar_last"
+    assert "likely cause" in s["status"] and "quaternion_convention" in s["status"]
+    (w,) = [w for w in result.warnings if w.code == "quaternion_convention"]
+    assert "qx, qy, qz, qw" in w.message and w.evidence["convention"] == "scalar_last"
+    assert max(s["residual_rms_arcsec"]) > 100
+    assert "implausible_input" not in {w.code for w in result.warnings}  # the cause is named
+
+
+def test_time_offset_reported_and_corrected() -> None:
+    sc = scenario(8)
+    shifted = _with_star_tracker(sc, shift_ns=-400_000_000)  # tags 0.4 s early: true time = tag + 0.4 s
+    plain = JOB.run(inputs(sc, shifted), JOB.params(subintervals=[]), no_progress)
+    s = plain.summary
+    assert abs(s["time_offset_s"] - 0.4) <= 3 * s["time_offset_sigma_s"] and s["time_offset_corrected_s"] is None
+    (w,) = [w for w in plain.warnings if w.code == "time_offset"]
+    assert "fit_time_offset" in w.message and w.evidence["time_offset_s"] == s["time_offset_s"]
+    fixed = JOB.run(inputs(sc, shifted), JOB.params(subintervals=[], fit_time_offset=True), no_progress)
+    f = fixed.summary
+    assert f["time_offset_corrected_s"] == s["time_offset_s"]
+    (wf,) = [w for w in fixed.warnings if w.code == "time_offset"]
+    assert wf.evidence["corrected"] is True and "were corrected" in wf.message
+    # the correction removes the offset's share of the residuals (the 0.4 Hz vibration seen 0.4 s late)
+    assert np.all(np.array(f["residual_rms_arcsec"]) < np.array(s["residual_rms_arcsec"]))
+    b, sig = np.array(f["gyro_bias_rad_s"]), np.array(f["gyro_bias_sigma_rad_s"])
+    assert np.all(np.abs(b - sc.truth.gyro_bias0_rad_s) <= 4 * sig)
+
+
+def test_drifting_offsets_inflate_the_sigma_and_warn() -> None:
+    drift_G = tuple(np.array([1.0, -1.0, 0.5]) * 0.5 * RAD_PER_ARCSEC / 1200.0)  # 0.5"/s over the window
+    sc = scenario(9, gyro_bias_drift_rad_s2=drift_G)
+    result = run(sc)
+    s = result.summary
+    (w,) = [w for w in result.warnings if w.code == "bias_not_constant"]
+    assert w.evidence["p_value"] < 1e-6 and w.evidence["dof"] == 9
+    assert s["offset_constancy"]["constant"] is False
+    sig, sig_c = np.array(s["gyro_bias_sigma_rad_s"]), np.array(s["gyro_bias_sigma_constant_rad_s"])
+    assert np.all(sig >= sig_c) and np.max(sig / sig_c) > 3
+    mean_bias = sc.truth.gyro_bias0_rad_s + np.array(drift_G) * 600.0  # the offset averaged over the window
+    assert np.all(np.abs(np.array(s["gyro_bias_rad_s"]) - mean_bias) <= 3 * sig)
+    np.testing.assert_allclose(np.sqrt(np.diag(s["covariance"])[3:6]) / RAD_PER_ARCSEC,
+                               s["delta_sensor_sigma_arcsec_s"], rtol=1e-9)

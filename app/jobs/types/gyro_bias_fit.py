@@ -5,11 +5,18 @@ window, works in the reference star tracker's frame (003 §2.4), fits the whole 
 sub-intervals, and reports the offsets in the sensor frame (the paper's Delta, arcsec/s) and in the body
 frame as a gyro bias (w_meas = w_true + b, rad/s), each with the honest sigma (gyro noise included) and
 the paper's sigma_w² C^-1 figure (``*_sigma_paper``). Figures follow 003 figs. 13-16.
+
+Before the fit every tracker's quaternions are checked against the gyro
+(:func:`processing.star_tracker.plausibility.check_star_tracker_gyro`: the quaternion convention and the
+time-tag offset); ``fit_time_offset`` corrects the gyro times by the reference tracker's offset. After it the
+constancy of the offsets across the finest split of ``subintervals`` is tested
+(:func:`processing.gyro_calibration.subintervals.offset_constancy`) and, when it fails, the reported sigma
+carries the offsets' variation within the window (``bias_not_constant``).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Annotated, Any, Literal
 
 import numpy as np
@@ -20,10 +27,22 @@ from pydantic import BaseModel, ConfigDict, Field, PositiveFloat
 from app.jobs.registry import JobType
 from app.reports.headline import Answer
 from processing.attitude import rotations
-from processing.gyro_calibration.bias_fit import GyroBiasFit, GyroBiasFitError, estimate_gyro_arw, fit_gyro_bias
-from processing.gyro_calibration.subintervals import fit_subintervals, subinterval_edges
+from processing.gyro_calibration.bias_fit import (
+    RESIDUAL_CONSISTENCY_MAX,
+    GyroBiasFit,
+    GyroBiasFitError,
+    estimate_gyro_arw,
+    fit_gyro_bias,
+)
+from processing.gyro_calibration.subintervals import (
+    ConstancyTest,
+    fit_subintervals,
+    offset_constancy,
+    subinterval_edges,
+)
 from processing.signal.sine_series import SineSeriesError, fit_sine_series, select_harmonics
-from processing.tasks import Progress, TaskError, TaskInputs, TaskResult
+from processing.star_tracker.plausibility import PlausibilityError, PlausibilityResult, check_star_tracker_gyro
+from processing.tasks import Progress, ResultWarning, TaskError, TaskInputs, TaskResult
 from processing.time.timescales import tai_ns_to_iso
 from processing.units import ARCSEC_PER_RAD, DEG_H_PER_RAD_S, NS_PER_S, RAD_PER_ARCSEC, RAD_PER_DEG
 
@@ -68,6 +87,12 @@ class Params(BaseModel):
     )
     max_gyro_gap_s: PositiveFloat = Field(5.0, description="Longest gyro gap bridged by interpolation.")
     max_iterations: int = Field(20, ge=1, le=200)
+    fit_time_offset: bool = Field(
+        False,
+        description="Correct the gyro times by the star-tracker time-tag offset estimated against the gyro "
+        "(the reference tracker's time_offset_s) before the fit; only when the offset is determined.",
+    )
+    max_time_offset_s: float = Field(1.0, gt=0, le=10, description="The time offset is searched within ±this.")
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -155,6 +180,7 @@ class _Window:
     sensor_index: NDArray[np.int64]
     q_RS: NDArray[np.float64]
     q_RG: NDArray[np.float64]
+    q_BS: dict[str, NDArray[np.float64]]
 
     @property
     def t_g(self) -> NDArray[np.float64]:
@@ -180,6 +206,15 @@ class _Outcome:
     arw_source: str
     w_ap: NDArray[np.float64] | None
     harmonics: int | None
+    plausibility: dict[str, PlausibilityResult | str]
+    time_offset_applied_s: float | None
+    constancy: ConstancyTest | None
+
+    @property
+    def delta_covariance(self) -> NDArray[np.float64]:
+        """Covariance of Delta to report (R axes): the fit's, plus the offsets' variation when they drift."""
+        c = self.constancy
+        return self.fit.covariance[3:6, 3:6] if c is None or c.constant else c.covariance
 
 
 def _window(inputs: TaskInputs, params: Params, notes: list[str]) -> _Window:
@@ -203,7 +238,46 @@ def _window(inputs: TaskInputs, params: Params, notes: list[str]) -> _Window:
     q_RS = np.stack([rotations.quat_multiply(q_SB_ref, q_BS[s]) for s in names])[sensor_index]
     return _Window(names=names, q_BG=q_BG, epoch=int(t_g_ns[0]), t_g_ns=t_g_ns, w_G=w_G, t_st_ns=t_st_ns,
                    q_IS=q_IS, sensor_of=sensor_of, sensor_index=sensor_index, q_RS=q_RS,
-                   q_RG=rotations.quat_multiply(q_SB_ref, q_BG))
+                   q_RG=rotations.quat_multiply(q_SB_ref, q_BG), q_BS=q_BS)
+
+
+def _plausibility(win: _Window, params: Params, notes: list[str]) -> dict[str, PlausibilityResult | str]:
+    """Each tracker's quaternions against the gyro (convention, time offset); a message when it cannot run."""
+    out: dict[str, PlausibilityResult | str] = {}
+    for name in win.names:
+        sel = win.sensor_of == name
+        try:
+            out[name] = check_star_tracker_gyro(win.t_st_ns[sel], win.q_IS[sel], win.q_BS[name], win.t_g_ns, win.w_G,
+                                                win.q_BG, sensor=name, max_time_offset_s=params.max_time_offset_s)
+        except PlausibilityError as exc:
+            out[name] = str(exc)
+            notes.append(f"{name}: star tracker not checked against the gyro: {exc}")
+    return out
+
+
+def _shift_gyro(win: _Window, params: Params, plaus: dict[str, PlausibilityResult | str],
+                notes: list[str]) -> tuple[_Window, float | None]:
+    """With fit_time_offset, the gyro times moved by the reference tracker's offset (tag + tau = gyro time):
+    t_gyro -= tau, so that each star-tracker tag meets the gyro sample of its true time."""
+    ref = plaus.get(win.names[0])
+    if not params.fit_time_offset:
+        return win, None
+    if not isinstance(ref, PlausibilityResult) or ref.time_offset_s is None:
+        notes.append("fit_time_offset: the time offset is not determined by these data; gyro times not corrected")
+        return win, None
+    if ref.convention != "as_given":
+        notes.append(f"fit_time_offset: the quaternions fit the gyro only as {ref.convention}; gyro times not "
+                     "corrected (re-upload them first)")
+        return win, None
+    tau = ref.time_offset_s
+    t_g_ns = win.t_g_ns - int(round(tau * NS_PER_S))
+    keep = (win.t_st_ns >= t_g_ns[0]) & (win.t_st_ns <= t_g_ns[-1])
+    if np.count_nonzero(keep) < 4:
+        raise TaskError("fit_time_offset: fewer than 4 star-tracker samples lie within the shifted gyro span")
+    notes.append(f"gyro times corrected by the star-tracker time offset {1e3 * tau:.2f} ms (fit_time_offset)")
+    shifted = replace(win, epoch=int(t_g_ns[0]), t_g_ns=t_g_ns, t_st_ns=win.t_st_ns[keep], q_IS=win.q_IS[keep],
+                      sensor_of=win.sensor_of[keep], sensor_index=win.sensor_index[keep], q_RS=win.q_RS[keep])
+    return shifted, tau
 
 
 def _arw(win: _Window, params: Params) -> tuple[NDArray[np.float64], str]:
@@ -253,7 +327,7 @@ def _fit(win: _Window, params: Params, w_fit: NDArray[np.float64], arw: NDArray[
     except GyroBiasFitError as exc:
         raise TaskError(str(exc)) from exc
     if not fit.converged:
-        notes.append(f"Gauss-Newton {fit.status}")
+        notes.append(fit.status if fit.status.startswith("not converged") else f"Gauss-Newton {fit.status}")
     progress(0.5, "sub-intervals")
     try:
         edges = subinterval_edges(
@@ -280,17 +354,88 @@ def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
     notes: list[str] = []
     progress(0.0, "loading")
     win = _window(inputs, params, notes)
+    progress(0.02, "checking the star trackers against the gyro")
+    plaus = _plausibility(win, params, notes)
+    win, applied = _shift_gyro(win, params, plaus, notes)
     arw, arw_source = _arw(win, params)
     w_fit, harmonics = _rates_to_fit(win, params, notes, progress)
     fit, subs, edges, kinds = _fit(win, params, w_fit, arw, notes, progress)
     progress(0.9, "report")
+    finest = max((int(n) for n in params.subintervals if int(n) >= 2), default=None)
+    constancy = None if finest is None else offset_constancy(
+        fit, [f for f, (kind, parts, _) in zip(subs, kinds, strict=True) if kind == "split" and parts == finest])
     outcome = _Outcome(window=win, params=params, fit=fit, subs=subs, edges=edges, kinds=kinds, arw=arw,
-                       arw_source=arw_source, w_ap=w_fit if params.use_smoothed_rates else None, harmonics=harmonics)
+                       arw_source=arw_source, w_ap=w_fit if params.use_smoothed_rates else None, harmonics=harmonics,
+                       plausibility=plaus, time_offset_applied_s=applied, constancy=constancy)
     sub_rows = _subinterval_rows(outcome)
-    summary = _summary(outcome, sub_rows)
+    warnings = _warnings(outcome)
+    summary = _summary(outcome, sub_rows, warnings)
     tables = {**_series_tables(outcome), "subintervals": _subinterval_table(sub_rows)}
     progress(1.0, "done")
-    return TaskResult(summary=summary, tables=tables, notes=notes)
+    return TaskResult(summary=summary, tables=tables, notes=notes, warnings=warnings)
+
+
+CAUSES = ("quaternion_convention", "implausible_input", "time_offset", "bias_not_constant")
+"""Warnings that explain residuals beyond the noise."""
+
+
+def _causes(warnings: list[ResultWarning]) -> list[str]:
+    return sorted({w.code for w in warnings if w.code in CAUSES})
+
+
+def _warnings(r: _Outcome) -> list[ResultWarning]:
+    """The plausibility findings of every tracker, the undetermined time offset, drifting offsets, and a fit
+    whose residuals the noise does not explain (named after its likely cause when another warning has none)."""
+    out: list[ResultWarning] = []
+    ref = r.plausibility.get(r.window.names[0])
+    for name, res in r.plausibility.items():
+        if not isinstance(res, PlausibilityResult):
+            continue
+        for w in res.warnings:
+            if w.code == "time_offset" and name == r.window.names[0] and r.time_offset_applied_s is not None:
+                tau = r.time_offset_applied_s
+                w = ResultWarning(w.code, f"{name}: the star-tracker samples were taken {1e3 * abs(tau):.1f} ± "
+                                  f"{1e3 * (res.time_offset_sigma_s or 0.0):.1f} ms {'after' if tau > 0 else 'before'} "
+                                  "their time tags, on the gyro's clock; the gyro times were corrected by it before "
+                                  "the fit (fit_time_offset): correct the time tags at the source",
+                                  {**w.evidence, "corrected": True})
+            out.append(w)
+    if isinstance(ref, PlausibilityResult):
+        nw = ref.not_observable_warning()
+        if nw is not None:
+            out.append(ResultWarning(nw.code, f"{r.window.names[0]}: {nw.message}", nw.evidence))
+    else:
+        out.append(ResultWarning("not_observable", f"{r.window.names[0]}: the star tracker could not be checked "
+                                 f"against the gyro ({ref}): time_offset_s is null", {"parameters": ["time_offset_s"]}))
+    c = r.constancy
+    if c is not None and not c.constant:
+        a = ARCSEC_PER_RAD
+        out.append(ResultWarning(
+            "bias_not_constant",
+            f"the gyro offsets differ between the {c.parts} sub-intervals beyond their sigmas (chi² {c.chi2:.1f} "
+            f"with {c.dof} degrees of freedom, p = {c.p_value:.2g}): the offsets drift within the window; the "
+            f"reported sigma includes their spread (x {np.round(c.inflation, 1).tolist()}); fit shorter windows "
+            "(sliding_window_s) to follow the drift",
+            {"parts": c.parts, "chi2": c.chi2, "dof": c.dof, "p_value": c.p_value, "alpha": c.alpha,
+             "inflation": [float(x) for x in c.inflation],
+             "between_sigma_sensor_arcsec_s": [float(x) for x in c.between_sigma_rad_s * a],
+             "subinterval_delta_sensor_arcsec_s": [[float(x) for x in row] for row in c.estimates * a],
+             "subinterval_delta_sigma_sensor_arcsec_s": [[float(x) for x in row] for row in c.sigmas * a]},
+        ))
+    fit = r.fit
+    if float(np.max(fit.residual_consistency)) > RESIDUAL_CONSISTENCY_MAX and not _causes(out):
+        rms = fit.residual_rms_rad * ARCSEC_PER_RAD
+        out.append(ResultWarning(
+            "implausible_input",
+            f"the fit's residuals {np.round(rms[0], 1).tolist()} arcsec rms are "
+            f"{np.round(np.sqrt(fit.residual_consistency[0]), 1).tolist()} times what the star-tracker and gyro "
+            "noise explain, and neither the convention check, the time offset nor the offsets' constancy names a "
+            "cause: check the mountings and the gyro data",
+            {"residual_rms_arcsec": [[float(x) for x in row] for row in rms],
+             "residual_consistency": [[float(x) for x in row] for row in fit.residual_consistency],
+             "consistency_max": RESIDUAL_CONSISTENCY_MAX},
+        ))
+    return out
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -343,31 +488,54 @@ def _mounting(fit: GyroBiasFit, q_BR: NDArray[np.float64]) -> dict[str, Any] | N
     }
 
 
-def _summary(r: _Outcome, sub_rows: list[dict[str, Any]]) -> dict[str, Any]:
+def _summary(r: _Outcome, sub_rows: list[dict[str, Any]], warnings: list[ResultWarning]) -> dict[str, Any]:
     fit, win, params, arcsec = r.fit, r.window, r.params, ARCSEC_PER_RAD
-    b, b_sig = _bias_body(fit, win.q_BG, fit.covariance[3:6, 3:6])
+    cov_delta = r.delta_covariance
+    b, b_sig = _bias_body(fit, win.q_BG, cov_delta)
+    _, b_sig_constant = _bias_body(fit, win.q_BG, fit.covariance[3:6, 3:6])
     _, b_sig_paper = _bias_body(fit, win.q_BG, fit.covariance_paper[3:6, 3:6])
+    covariance = fit.covariance.copy()
+    covariance[3:6, 3:6] = cov_delta
     q_BR = rotations.quat_multiply(win.q_BG, rotations.quat_conjugate(fit.q_RG))
     q_IB0 = rotations.quat_canonical(rotations.quat_multiply(fit.q_IR0, rotations.quat_conjugate(q_BR)))
     t0_ns = win.epoch + int(round(fit.t0_s * NS_PER_S))
+    status = fit.status
+    if not fit.converged and float(np.max(fit.residual_consistency)) > RESIDUAL_CONSISTENCY_MAX and _causes(warnings):
+        status += f"; likely cause: {', '.join(_causes(warnings))} (see the warnings)"
+    found = r.plausibility.get(win.names[0])
+    ref = found if isinstance(found, PlausibilityResult) else None
     sensors = {
         name: {
             "n_samples": int(fit.n_samples[j]),
             "residual_rms_arcsec": _floats(fit.residual_rms_rad[j] * arcsec),
             "residual_rms_gyro_arcsec": _floats(fit.residual_rms_gyro_rad[j] * arcsec),
             "star_tracker_sigma_arcsec": _floats(fit.star_tracker_sigma_rad[j] * arcsec),
+            "residual_consistency": _floats(fit.residual_consistency[j]),
+            "plausibility": (res.summary() if isinstance(res := r.plausibility.get(name), PlausibilityResult)
+                             else {"error": res}),
         }
         for j, name in enumerate(win.names)
     }
+    c = r.constancy
     return {
         "gyro_bias_rad_s": _floats(b),
         "gyro_bias_sigma_rad_s": _floats(b_sig),
+        "gyro_bias_sigma_constant_rad_s": _floats(b_sig_constant),
         "gyro_bias_sigma_paper_rad_s": _floats(b_sig_paper),
         "delta_sensor_arcsec_s": _floats(fit.delta_R_rad_s * arcsec),
-        "delta_sensor_sigma_arcsec_s": _floats(fit.sigma[3:6] * arcsec),
+        "delta_sensor_sigma_arcsec_s": _floats(np.sqrt(np.diag(cov_delta)) * arcsec),
         "delta_sensor_sigma_paper_arcsec_s": _floats(fit.sigma_paper[3:6] * arcsec),
         "delta_body_arcsec_s": _floats(-b * arcsec),
         "delta_body_sigma_arcsec_s": _floats(b_sig * arcsec),
+        "offset_constancy": None if c is None else {
+            "parts": c.parts, "chi2": float(c.chi2), "dof": c.dof, "p_value": float(c.p_value), "alpha": c.alpha,
+            "constant": bool(c.constant), "inflation": _floats(c.inflation),
+            "between_sigma_sensor_arcsec_s": _floats(c.between_sigma_rad_s * arcsec)},
+        "time_offset_s": None if ref is None else ref.time_offset_s,
+        "time_offset_sigma_s": None if ref is None else ref.time_offset_sigma_s,
+        "time_offset_observable": False if ref is None else bool(ref.time_offset_observable),
+        "time_offset_corrected_s": r.time_offset_applied_s,
+        "quaternion_convention": None if ref is None else ref.convention,
         "initial_mrp": _floats(fit.initial_mrp),
         "initial_mrp_sigma": _floats(fit.sigma[:3]),
         "initial_mrp_sigma_paper": _floats(fit.sigma_paper[:3]),
@@ -378,10 +546,11 @@ def _summary(r: _Outcome, sub_rows: list[dict[str, Any]]) -> dict[str, Any]:
         "sigma_unit_weight": float(fit.sigma_unit_weight),
         "residual_rms_arcsec": _floats(fit.residual_rms_rad[0] * arcsec),
         "residual_rms_gyro_arcsec": _floats(fit.residual_rms_gyro_rad[0] * arcsec),
+        "residual_consistency": _floats(fit.residual_consistency[0]),
         "star_tracker_sigma_arcsec": _floats(fit.star_tracker_sigma_rad[0] * arcsec),
         "iterations": int(fit.iterations),
         "converged": bool(fit.converged),
-        "status": fit.status,
+        "status": status,
         "scheme": int(params.scheme),
         "use_smoothed_rates": bool(params.use_smoothed_rates),
         "smoothing_harmonics": r.harmonics,
@@ -393,7 +562,7 @@ def _summary(r: _Outcome, sub_rows: list[dict[str, Any]]) -> dict[str, Any]:
         "n_star_tracker_samples": int(fit.n_samples.sum()),
         "n_gyro_samples": int(win.t_g_ns.size),
         "parameter_names": list(fit.parameter_names),
-        "covariance": [_floats(row) for row in fit.covariance],
+        "covariance": [_floats(row) for row in covariance],
         "covariance_paper": [_floats(row) for row in fit.covariance_paper],
         "condition_number": float(fit.condition_number),
         "mounting": _mounting(fit, q_BR),
