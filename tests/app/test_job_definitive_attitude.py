@@ -67,6 +67,29 @@ def test_summary_keys_and_values(two_heads) -> None:  # noqa: ANN001
     assert "time_offset" in codes and "filter_inconsistent" not in codes and "not_observable" not in codes
 
 
+def test_heads_checked_against_the_gyro(two_heads) -> None:  # noqa: ANN001
+    _, res = two_heads
+    p = res.summary["plausibility"]
+    assert set(p) == {"st1", "st2"}
+    assert all(p[h]["checked"] and p[h]["convention"] == "as_given" for h in p)
+    assert not {"quaternion_convention", "implausible_input"} & {w.code for w in res.warnings}
+    # the filter estimates the time offset itself: the check's own time_offset warning is not repeated
+    assert [w.code for w in res.warnings].count("time_offset") == 1
+
+
+def test_a_conjugated_head_is_named() -> None:
+    sc = simulate_definitive(start_tai_ns=T0, duration_s=600.0, seed=5, heads=default_heads(2))
+    st = sc.streams["star_tracker"]
+    bad = st["sensor"] == "st2"
+    for c in ("q1", "q2", "q3"):
+        st[c] = np.where(bad, -st[c], st[c])
+    res = DEFINITIVE.run(_inputs(sc), DParams(), no_progress)
+    p = res.summary["plausibility"]
+    assert p["st1"]["convention"] == "as_given" and p["st2"]["convention"] != "as_given"
+    conv = [w for w in res.warnings if w.code == "quaternion_convention"]
+    assert len(conv) == 1 and "st2" in conv[0].message
+
+
 def test_tables_aem_figures_and_sections(two_heads) -> None:  # noqa: ANN001
     sc, res = two_heads
     att = res.tables["attitude"]

@@ -20,6 +20,7 @@ import numpy as np
 from matplotlib.figure import Figure
 from pydantic import BaseModel, ConfigDict, Field
 
+from app.jobs.plausibility import HeadSamples, check_heads, midpoint_rates
 from app.jobs.registry import JobType
 from app.reports.headline import Answer
 from app.reports.sections import ReportContext, ReportSection, ReportTable
@@ -271,6 +272,10 @@ def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
     except DefinitiveError as exc:
         raise TaskError(str(exc)) from exc
     summary = _summary(r, params)
+    notes = list(r.notes)
+    t_mid, w_mid = midpoint_rates(steps.t_ns, steps.da_G)
+    summary["plausibility"], plausible = check_heads(
+        [HeadSamples(h.name, h.time_tai_ns, h.q_IS, h.q_BS) for h in heads], t_mid, w_mid, q_BG, notes)
     comparison: dict[str, Any] = {}
     for name in params.compare_with:
         progress(0.85, f"comparison with {name}")
@@ -283,9 +288,10 @@ def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
     if comparison:
         summary["comparison"] = comparison
     progress(0.95, "tables and AEM")
-    return TaskResult(summary=summary, tables=_tables(r), notes=list(r.notes), files={AEM_FILE: (_aem(r, params),
-                                                                                                 "text/plain")},
-                      warnings=_warnings(r))
+    # with the time offset estimated as a state, the filter's own warning says it
+    plausible = [w for w in plausible if not (w.code == "time_offset" and r.time_offset_s is not None)]
+    return TaskResult(summary=summary, tables=_tables(r), notes=notes,
+                      files={AEM_FILE: (_aem(r, params), "text/plain")}, warnings=plausible + _warnings(r))
 
 
 # ---------------------------------------------------------------------------------------------------

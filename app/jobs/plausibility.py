@@ -1,0 +1,60 @@
+"""The star-tracker-against-gyro plausibility check (processing.star_tracker.plausibility) for the job types
+that take both: every head checked, its findings under ``plausibility`` in the summary and its warnings
+(``quaternion_convention``, ``implausible_input``, ``time_offset``) among the job's.
+
+gyro_bias_fit runs the check itself (it also corrects the gyro times on request); star_tracker_accuracy,
+alignment_calibration and definitive_attitude call :func:`check_heads` so that the same inputs give the
+same findings whichever job reads them.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from processing.star_tracker.plausibility import PlausibilityError, check_star_tracker_gyro
+from processing.tasks import ResultWarning
+
+
+@dataclass(frozen=True)
+class HeadSamples:
+    """One star tracker's samples: name, times (N,) int64 TAI ns, q_IS (N, 4) as stored, mounting q_BS (4,)."""
+
+    name: str
+    time_tai_ns: NDArray[np.int64]
+    q_IS: NDArray[np.float64]
+    q_BS: NDArray[np.float64]
+
+
+def midpoint_rates(t_nodes_ns: NDArray[np.int64], da_G: NDArray[np.float64]) -> tuple[NDArray[np.int64],
+                                                                                       NDArray[np.float64]]:
+    """Mean rates over consecutive gyro steps at their midpoints: t (M,) int64, w_G (M, 3) rad/s, from node
+    times (M+1,) and the angle increments (M, 3) between them (what the check takes for increments)."""
+    t = np.asarray(t_nodes_ns, dtype=np.int64)
+    dt_s = np.diff(t).astype(np.float64) / 1e9
+    return t[:-1] + np.diff(t) // 2, np.asarray(da_G, dtype=np.float64) / dt_s[:, None]
+
+
+def check_heads(heads: Sequence[HeadSamples], t_gyro_ns: NDArray[np.int64], w_G: NDArray[np.float64],
+                q_BG: NDArray[np.float64], notes: list[str],
+                max_time_offset_s: float = 1.0) -> tuple[dict[str, Any], list[ResultWarning]]:
+    """({head: its plausibility summary, or {"checked": False, "reason": ...}}, the warnings of every head).
+
+    A head that cannot be checked (too few samples within the gyro span) gets a note, not a warning."""
+    summary: dict[str, Any] = {}
+    warnings: list[ResultWarning] = []
+    for h in heads:
+        try:
+            res = check_star_tracker_gyro(h.time_tai_ns, h.q_IS, h.q_BS, t_gyro_ns, w_G, q_BG, sensor=h.name,
+                                          max_time_offset_s=max_time_offset_s)
+        except PlausibilityError as exc:
+            summary[h.name] = {"checked": False, "reason": str(exc)}
+            notes.append(f"{h.name}: star tracker not checked against the gyro: {exc}")
+            continue
+        summary[h.name] = {"checked": True, **res.summary()}
+        warnings.extend(res.warnings)
+    return summary, warnings
