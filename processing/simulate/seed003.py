@@ -36,6 +36,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+import scipy.signal
 from numpy.random import PCG64, Generator, SeedSequence
 from numpy.typing import ArrayLike, NDArray
 
@@ -92,6 +93,10 @@ class Truth003:
     nominal times, st_removed_time_tai_ns the removed ones, st_gap_intervals_tai_ns (G,2) pairs
     (last sample before, first sample after) of each gap.
     GNSS: gnss_time_tai_ns (K,), r_I, v_I (GCRS), r_E, v_E (ITRS, zero EOP) noise-free (K,3).
+    Failure-case options (all off by default): st_outlier_mask (M,) the star-tracker samples moved by an
+    outlier rotation st_outlier_rotvec_S (M,3) (zero elsewhere, not part of st_noise_rotvec_S);
+    st_noise_tau_s the correlation time of first-order Gauss-Markov star-tracker noise (None: white);
+    gyro_line_rad_s (N,3) the gyro-only oscillation added to the gyro rates in G (not attitude motion).
     """
 
     model: OrbitalAttitudeModel
@@ -127,6 +132,10 @@ class Truth003:
     gnss_position_noise_std_m: float
     gnss_velocity_noise_std_m_s: float
     eop: EarthOrientation
+    st_outlier_mask: NDArray | None = None
+    st_outlier_rotvec_S: NDArray | None = None
+    st_noise_tau_s: float | None = None
+    gyro_line_rad_s: NDArray | None = None
 
 
 @dataclass(frozen=True)
@@ -222,6 +231,11 @@ def simulate_seed003(
     gyro_noise_std_rad_s: float = 1.5 * RAD_PER_ARCSEC,
     gnss_position_noise_std_m: float = 1.0,
     gnss_velocity_noise_std_m_s: float = 1e-3,
+    st_outlier_fraction: float = 0.0,
+    st_outlier_size_rad: float = 300.0 * RAD_PER_ARCSEC,
+    st_noise_tau_s: float | None = None,
+    gyro_line_hz: float = 0.25,
+    gyro_line_amplitude_rad_s: tuple[float, float, float] = (0.0, 0.0, 0.0),
 ) -> Scenario003:
     """Simulate a 003 (Meteor-M) segment: star tracker, gyro and GNSS telemetry with known truth.
 
@@ -229,12 +243,17 @@ def simulate_seed003(
     since 1970-01-01T00:00:00 TAI). vibration_amplitude_rad is per angle (pitch, yaw, roll);
     st_noise_std_rad per sensor axis (x1, x2, x3); gyro biases in the gyro frame. Grids include the
     start and every sample up to start + duration_s. See the module docstring for the model.
-    Returns :class:`Scenario003`.
+    Failure cases (issue 17; defaults off, and the default output unchanged): ``st_outlier_fraction`` of
+    the star-tracker samples (chosen at random) turned by ``st_outlier_size_rad`` about a random axis;
+    ``st_noise_tau_s``: first-order Gauss-Markov star-tracker noise, x_k = phi x_{k-1} + sqrt(1 - phi^2)
+    sigma w_k, phi = exp(-dt/tau), on the nominal grid (stationary std st_noise_std_rad) instead of
+    white; ``gyro_line_amplitude_rad_s`` (per gyro axis) at ``gyro_line_hz``: an oscillation of the gyro
+    output only (e.g. a resonance of its mounting), not of the attitude. Returns :class:`Scenario003`.
     """
     parameters = {k: v for k, v in locals().items() if k != "parameters"}
     _check_parameters(parameters)
-    rng_attitude, rng_st, rng_gaps, rng_gyro, rng_gnss = (
-        Generator(PCG64(s)) for s in SeedSequence(seed).spawn(5)
+    rng_attitude, rng_st, rng_gaps, rng_gyro, rng_gnss, rng_outliers, rng_gyro_line = (
+        Generator(PCG64(s)) for s in SeedSequence(seed).spawn(7)  # the first five as before (spawn keys)
     )
     a_m = R_EARTH_M + altitude_m
     model = OrbitalAttitudeModel(
@@ -248,9 +267,10 @@ def simulate_seed003(
     )
     q_BS = mounting_q_BS_003(alpha_rad)
     st = _star_tracker(model, start_tai_ns, duration_s, st_period_s, st_time_offset_s, q_BS, st_noise_std_rad,
-                       (gap_fraction, n_st_gaps), rng_gaps, rng_st)
+                       (gap_fraction, n_st_gaps), rng_gaps, rng_st, st_noise_tau_s,
+                       (st_outlier_fraction, st_outlier_size_rad), rng_outliers)
     gyro = _gyro(model, start_tai_ns, duration_s, gyro_period_s, q_BG, gyro_bias_rad_s, gyro_bias_drift_rad_s2,
-                 gyro_noise_std_rad_s, rng_gyro)
+                 gyro_noise_std_rad_s, rng_gyro, (gyro_line_hz, gyro_line_amplitude_rad_s), rng_gyro_line)
     gnss = _gnss(model, start_tai_ns, duration_s, gnss_period_s, gnss_position_noise_std_m,
                  gnss_velocity_noise_std_m_s, rng_gnss)
     streams = {"star_tracker": st.columns(), "gyro": gyro.columns(), "gnss": gnss.columns()}
@@ -268,7 +288,8 @@ def simulate_seed003(
         st_removed_time_tai_ns=st.nominal_tai_ns[~st.keep], st_gap_intervals_tai_ns=st.gap_intervals_tai_ns,
         gnss_time_tai_ns=gnss.time_tai_ns, r_I=gnss.r_I, v_I=gnss.v_I, r_E=gnss.r_E, v_E=gnss.v_E,
         gnss_position_noise_std_m=gnss_position_noise_std_m, gnss_velocity_noise_std_m_s=gnss_velocity_noise_std_m_s,
-        eop=gnss.eop,
+        eop=gnss.eop, st_outlier_mask=st.outlier_mask, st_outlier_rotvec_S=st.outlier_S,
+        st_noise_tau_s=st_noise_tau_s, gyro_line_rad_s=gyro.line_rad_s,
     )
     return Scenario003(streams=streams, config=config, truth=truth, parameters=parameters)
 
@@ -290,6 +311,11 @@ def _check_parameters(p: dict[str, Any]) -> None:
     _check(min(p["st_noise_std_rad"]) >= 0 and p["gyro_noise_std_rad_s"] >= 0, "noise standard deviations must be >= 0")
     _check(p["gnss_position_noise_std_m"] >= 0 and p["gnss_velocity_noise_std_m_s"] >= 0, "GNSS noise must be >= 0")
     _check(np.shape(p["q_BG"]) == (4,), f"q_BG must have 4 components, got {p['q_BG']!r}")
+    _check(0.0 <= p["st_outlier_fraction"] <= 0.5, f"st_outlier_fraction must be in [0, 0.5], got "
+           f"{p['st_outlier_fraction']}")
+    _check(p["st_noise_tau_s"] is None or p["st_noise_tau_s"] > 0, "st_noise_tau_s must be None or > 0")
+    _check(p["gyro_line_hz"] > 0 and np.shape(p["gyro_line_amplitude_rad_s"]) == (3,),
+           "gyro_line_hz must be > 0 and gyro_line_amplitude_rad_s have 3 components")
 
 
 def _seconds(t_ns: NDArray, start_tai_ns: int) -> NDArray:
@@ -309,6 +335,8 @@ class _StarTracker:
     q_IS: NDArray
     noise_S: NDArray
     gap_intervals_tai_ns: NDArray
+    outlier_mask: NDArray
+    outlier_S: NDArray
 
     def columns(self) -> dict[str, NDArray]:
         return {
@@ -321,19 +349,42 @@ class _StarTracker:
 def _star_tracker(
     model: OrbitalAttitudeModel, start_tai_ns: int, duration_s: float, period_s: float, offset_s: float,
     q_BS: NDArray, noise_std_rad: tuple[float, float, float], gaps: tuple[float, int], rng_gaps: Generator,
-    rng_st: Generator,
+    rng_st: Generator, tau_s: float | None = None, outliers: tuple[float, float] = (0.0, 0.0),
+    rng_outliers: Generator | None = None,
 ) -> _StarTracker:
-    """q_IS = q_IB o q_BS o exp(noise about the sensor axes), gaps (fraction, count) removed."""
+    """q_IS = q_IB o q_BS o exp(noise about the sensor axes) (white, or Gauss-Markov with tau_s) o
+    exp(outlier rotation on a fraction of the samples), gaps (fraction, count) removed."""
     nominal = time_grid_tai_ns(start_tai_ns, duration_s, period_s, offset_s)
     keep = gap_mask(nominal.size, gaps[0], gaps[1], rng_gaps)
     st_time = nominal[keep]
     state = model.evaluate(_seconds(st_time, start_tai_ns))
     q_IS_true = rotations.quat_canonical(rotations.quat_multiply(state.q_IB, q_BS))
-    noise_S = rng_st.standard_normal((st_time.size, 3)) * np.asarray(noise_std_rad)
-    q_IS = rotations.quat_canonical(rotations.quat_multiply(q_IS_true, rotations.rotvec_to_quat(noise_S)))
+    if tau_s is None:
+        noise_S = rng_st.standard_normal((st_time.size, 3)) * np.asarray(noise_std_rad)
+    else:
+        noise_S = _gauss_markov(rng_st.standard_normal((nominal.size, 3)), period_s, tau_s)[keep] * np.asarray(
+            noise_std_rad)
+    outlier_mask = np.zeros(st_time.size, dtype=bool)
+    outlier_S = np.zeros((st_time.size, 3))
+    if outliers[0] > 0 and rng_outliers is not None:
+        idx = rng_outliers.choice(st_time.size, size=int(round(outliers[0] * st_time.size)), replace=False)
+        axis = rng_outliers.standard_normal((idx.size, 3))
+        outlier_mask[idx] = True
+        outlier_S[idx] = outliers[1] * axis / np.linalg.norm(axis, axis=1, keepdims=True)
+    q_IS = rotations.quat_canonical(rotations.quat_multiply(
+        q_IS_true, rotations.quat_multiply(rotations.rotvec_to_quat(noise_S), rotations.rotvec_to_quat(outlier_S))))
     edges = np.flatnonzero(np.diff(keep.astype(np.int8)))  # index before each change keep <-> removed
     gap_intervals = np.stack([nominal[edges[0::2]], nominal[edges[1::2] + 1]], axis=-1)
-    return _StarTracker(nominal, keep, st_time, state, q_IS_true, q_IS, noise_S, gap_intervals)
+    return _StarTracker(nominal, keep, st_time, state, q_IS_true, q_IS, noise_S, gap_intervals, outlier_mask,
+                        outlier_S)
+
+
+def _gauss_markov(w: NDArray, period_s: float, tau_s: float) -> NDArray:
+    """Unit-variance first-order Gauss-Markov sequence (stationary from the first row) from white w (n, k)."""
+    phi = float(np.exp(-period_s / tau_s))
+    drive = w * np.sqrt(1.0 - phi**2)
+    drive[0] = w[0]
+    return scipy.signal.lfilter([1.0], [1.0, -phi], drive, axis=0)
 
 
 @dataclass(frozen=True)
@@ -345,6 +396,7 @@ class _Gyro:
     bias_rad_s: NDArray
     w_G: NDArray
     q_BG: NDArray
+    line_rad_s: NDArray
 
     def columns(self) -> dict[str, NDArray]:
         return {
@@ -357,8 +409,9 @@ class _Gyro:
 def _gyro(
     model: OrbitalAttitudeModel, start_tai_ns: int, duration_s: float, period_s: float, q_BG: ArrayLike,
     bias_rad_s: ArrayLike, bias_drift_rad_s2: ArrayLike, noise_std_rad_s: float, rng: Generator,
+    line: tuple[float, tuple[float, float, float]] = (1.0, (0.0, 0.0, 0.0)), rng_line: Generator | None = None,
 ) -> _Gyro:
-    """w_G = dcm_GB w_B + b(t) + noise."""
+    """w_G = dcm_GB w_B + b(t) + noise (+ a gyro-only line (frequency, amplitude per axis), random phases)."""
     q_BG_arr = rotations.quat_canonical(rotations.quat_normalize(np.asarray(q_BG, dtype=float)))
     gyro_time = time_grid_tai_ns(start_tai_ns, duration_s, period_s)
     t_gyro = _seconds(gyro_time, start_tai_ns)
@@ -366,7 +419,12 @@ def _gyro(
     bias = np.asarray(bias_rad_s, dtype=float) + np.asarray(bias_drift_rad_s2, dtype=float) * t_gyro[:, None]
     w_G_true = rotations.quat_rotate(rotations.quat_conjugate(q_BG_arr), state.w_B)
     w_G = w_G_true + bias + rng.standard_normal((gyro_time.size, 3)) * noise_std_rad_s
-    return _Gyro(gyro_time, state, bias, w_G, q_BG_arr)
+    line_rad_s = np.zeros_like(w_G)
+    if np.any(np.asarray(line[1])) and rng_line is not None:
+        phases = rng_line.uniform(0.0, 2.0 * np.pi, size=3)
+        line_rad_s = np.asarray(line[1], dtype=float) * np.sin(2.0 * np.pi * line[0] * t_gyro[:, None] + phases)
+        w_G = w_G + line_rad_s
+    return _Gyro(gyro_time, state, bias, w_G, q_BG_arr, line_rad_s)
 
 
 @dataclass(frozen=True)
