@@ -7,7 +7,10 @@ Method (003 = Avanesov et al., Keldysh Institute preprint 74, 2010):
    every q_n in the hemisphere of its predecessor) and the residual Rodrigues parameters (MRPs)
    z^(n) of q_c^-1 o q_n.
 2. Each z_i is smoothed by the sine series plus linear trend of 003 §1.3 (processing.signal.sine_series:
-   DST route without gaps, QR least squares with gaps).
+   DST route without gaps, QR least squares with gaps). 2b: outliers (samples far off, e.g. a
+   mis-identified star) are rejected and the segments refitted without them, iterated to a fixed
+   point (processing.star_tracker.robust: chi-square test of the three residuals against a robust MAD
+   scale, 1 % false-alarm probability per data set); rejected samples stay out of every later step.
 3. Residuals about the sensor axes x1, x2, x3. 003 eq. 2 takes e_i = 4 (z_i^(n) - z_i(t_n)), which is
    the rotation angle about x_i only while |z| << 1. In orbital orientation a 20-min segment turns
    by ~70 deg about nearly the boresight, |z| reaches 0.16 and eq. 2 mixes the axes
@@ -21,6 +24,11 @@ Method (003 = Avanesov et al., Keldysh Institute preprint 74, 2010):
    raw figure ``sigma_smoothing`` (003 §1.4, motion included) is, with gyro data,
    sqrt(sigma^2 + sum(e_raw^2 - e^2)/N) (noise dof-corrected, removed motion per sample), and
    without gyro data sqrt(sum e_raw^2 / (N - M - 2)).
+   3b (processing.star_tracker.whiteness): a spectral test of the residuals above the cutoff (flat for
+   white noise, falling for time-correlated noise that the harmonics partly absorb), the sigma above
+   the cutoff sqrt(sum e^2 / N) beside sigma, a lower bound of sigma for red noise, and a chi-square
+   95 % interval of each sigma with the least-squares dof (the effective dof from the residual
+   autocorrelation when the test fails).
 4. Angular velocity of the sensor from the smoothed z(t) and its analytic derivative (003 §1.3):
    w_S = 4/(1 + z.z)^2 [(1 - z.z) z' - 2 z x z' + 2 (z.z') z], and w_B = dcm_BS w_S (003 §1.1).
 5. Gyro (003 §1.4): body rates w_B = dcm_BG w_G smoothed by the same series with the same cutoff
@@ -43,6 +51,8 @@ Method (003 = Avanesov et al., Keldysh Institute preprint 74, 2010):
    own noise. Without gyro data nothing is removed (a line in the star-tracker residuals could be
    the sensor's own periodic error), and ``sigma_rad`` equals ``sigma_smoothing_rad``. Only lines
    are removed: broadband real motion above the cutoff (none in the seed-003 model) would stay in.
+   A gyro line is removed only when the star-tracker residuals contain it (coherence regression,
+   processing.star_tracker.accuracy_gyro.line_coherence); a line in the gyro only is kept out.
 8. Harmonic count M (003 §1.5 chose it by eye from the spectra): automatic as 2 x the minimiser of
    generalised cross-validation of the three z_i jointly, capped at (N - 2)/4 (half the
    star-tracker Nyquist frequency). Why twice: GCV balances truncation against noise for
@@ -75,10 +85,12 @@ from processing.signal.spectral_lines import find_lines
 from processing.star_tracker.accuracy_gyro import (
     GyroAnalysis,
     GyroComparison,
+    LineCoherence,
     SpectralLine,
     analyze_gyro,
     gyro_comparison,
 )
+from processing.star_tracker.robust import OUTLIER_ALPHA, OutlierRejection, reject_outliers
 from processing.star_tracker.smoothing import (
     SegmentSmoothing,
     rate_from_mrp,
@@ -88,6 +100,7 @@ from processing.star_tracker.smoothing import (
     smooth_segment,
     split_segments,
 )
+from processing.star_tracker.whiteness import ResidualSeries, Whiteness, sigma_interval, whiteness_test
 from processing.tasks import Progress
 from processing.units import NS_PER_S
 
@@ -142,11 +155,17 @@ class StarTrackerAccuracy:
     (003 §1.3, raw data), residuals_smoothing_rad (about x1 x2 x3, raw: the paper's e_i with the
     real motion in), residuals_eq2_rad (003 eq. 2 literally), residuals_rad (after removing the
     real motion the gyros see; = raw without gyro), motion_rad (the removed attitude oscillation
-    about x1 x2 x3), w_S_rad_s / w_B_rad_s (rates from the final smoothing).
+    about x1 x2 x3), w_S_rad_s / w_B_rad_s (rates from the final smoothing), outlier (bool: rejected,
+    not used in any fit or sigma).
     Per axis (3,): sigma_rad (sensor noise), sigma_smoothing_rad (003's figure),
     sigma_robust_rad (MAD, of residuals_rad), sigma_smoothing_robust_rad, sigma_eq2_rad,
     motion_rms_rad (rms of motion_rad). harmonics: M of each segment. gyro: comparison or None.
     lines, spectra ("gyro", "star_tracker_rate", "star_tracker_residuals"), notes.
+    Robustness (issue 17): outlier_threshold (rejection radius in robust sigmas), outlier_scale_rad (3,)
+    the robust scale; whiteness (the spectral test); sigma_above_cutoff_rad (3,) sqrt(rss / n);
+    sigma_lower_bound_rad (3,) (>= sigma_rad; above it only when the test finds red noise);
+    sigma_dof (3,) the dof of the interval (effective when correlated), sigma_ci95_rad (3, 2);
+    line_coherence: each gyro line against the star tracker (removed or not).
     """
 
     time_tai_ns: NDArray
@@ -165,12 +184,25 @@ class StarTrackerAccuracy:
     sigma_smoothing_robust_rad: NDArray
     sigma_eq2_rad: NDArray
     motion_rms_rad: NDArray
+    outlier: NDArray
+    outlier_threshold: float
+    outlier_scale_rad: NDArray
+    whiteness: Whiteness
+    sigma_above_cutoff_rad: NDArray
+    sigma_lower_bound_rad: NDArray
+    sigma_dof: NDArray
+    sigma_ci95_rad: NDArray
+    line_coherence: tuple[LineCoherence, ...]
     segments: tuple[SegmentFit, ...]
     sample_period_s: float
     gyro: GyroComparison | None
     lines: tuple[SpectralLine, ...]
     spectra: dict[str, Spectrum]
     notes: tuple[str, ...] = field(default=())
+
+    @property
+    def n_outliers(self) -> int:
+        return int(np.count_nonzero(self.outlier))
 
     @property
     def harmonics(self) -> list[int]:
@@ -214,16 +246,19 @@ def _check_inputs(time_tai_ns: ArrayLike, q_IS: ArrayLike, q_BS: ArrayLike, harm
 
 @dataclass(frozen=True)
 class _Segments:
-    """Steps 1-2: the smoothed segments and the notes about skipped or strongly turning ones."""
+    """Steps 1-2b: the smoothed segments (without their outliers), the rejection, and the notes about
+    skipped or strongly turning ones."""
 
     segments: tuple[SegmentSmoothing, ...]
     notes: tuple[str, ...]
+    rejection: OutlierRejection
 
 
 def _smooth_segments(
-    inp: _Inputs, harmonics: int | None, segment_max_s: float, max_gap_s: float, method: Method
+    inp: _Inputs, harmonics: int | None, segment_max_s: float, max_gap_s: float, method: Method,
+    outlier_alpha: float,
 ) -> _Segments:
-    """Steps 1-2: segments, mean quaternion, residual MRPs, raw smoothing (003 §1.3)."""
+    """Steps 1-2b: segments, mean quaternion, residual MRPs, raw smoothing (003 §1.3), outliers."""
     t_ns = inp.t_ns
     segments: list[SegmentSmoothing] = []
     notes: list[str] = []
@@ -248,7 +283,10 @@ def _smooth_segments(
         raise StarTrackerAccuracyError(
             f"no segment with at least {MIN_SEGMENT_SAMPLES} star-tracker samples (got {t_ns.size} samples)"
         )
-    return _Segments(tuple(segments), tuple(notes))
+    rejection = reject_outliers(segments, method, alpha=outlier_alpha)
+    if not rejection.converged:
+        notes.append(f"outlier rejection stopped after {rejection.iterations} iterations without a fixed point")
+    return _Segments(rejection.segments, tuple(notes), rejection)
 
 
 def _gyro_rates(gyro_time_tai_ns: ArrayLike, w_G_rad_s: ArrayLike, q_BG: ArrayLike) -> tuple[NDArray, NDArray]:
@@ -284,11 +322,14 @@ def _correct(seg: SegmentSmoothing, motion_S: NDArray) -> _Corrected:
 
 @dataclass(frozen=True)
 class _Residuals:
-    """Steps 3-4 per star-tracker sample (N rows, NaN outside the segments; ``rows`` those inside):
-    segment index, raw MRPs and their fit, residuals raw / eq. 2 / corrected, removed motion, w_S;
-    the per-segment summaries and the pooled degrees of freedom (raw, corrected)."""
+    """Steps 3-4 per star-tracker sample (N rows, NaN outside the segments; ``rows`` those inside, ``ok``
+    those inside and accepted (not outliers), ``outlier`` (N,) bool): segment index, raw MRPs and their
+    fit, residuals raw / eq. 2 / corrected, removed motion, w_S; the per-segment summaries (sums over
+    the accepted samples) and the pooled degrees of freedom (raw, corrected)."""
 
     rows: NDArray
+    ok: NDArray
+    outlier: NDArray
     segment: NDArray
     z: NDArray
     z_fit: NDArray
@@ -307,6 +348,7 @@ def _residuals(n_all: int, corrected: tuple[_Corrected, ...]) -> _Residuals:
     rows = np.concatenate([np.arange(c.seg.sl.start, c.seg.sl.stop) for c in corrected])
     z_all, z_fit_all, e_raw, e_eq2, e_cor, w_S = (np.full((n_all, 3), np.nan) for _ in range(6))
     motion = np.zeros((n_all, 3))
+    outlier = np.zeros(n_all, dtype=bool)
     seg_index = np.full(n_all, -1, dtype=np.int64)
     seg_out = []
     dof_raw = dof_cor = 0
@@ -320,16 +362,19 @@ def _residuals(n_all: int, corrected: tuple[_Corrected, ...]) -> _Residuals:
         motion[sl] = c.motion_S
         w_S[sl] = rate_from_mrp(fit.fitted, seg.solver.derivative_at_samples(fit))
         seg_index[sl] = i
+        outlier[sl] = ~seg.accepted
         dof_raw += seg.fit_raw.dof
         dof_cor += fit.dof
+        acc = seg.accepted
         seg_out.append(SegmentFit(
             sl.start, sl.stop, fit.harmonics, fit.cutoff_hz, fit.method, fit.span_s, fit.dof,
-            np.sum(e_raw[sl] ** 2, axis=0), np.sum(e_cor[sl] ** 2, axis=0), seg.q_c,
+            np.sum(e_raw[sl][acc] ** 2, axis=0), np.sum(e_cor[sl][acc] ** 2, axis=0), seg.q_c,
         ))
     if dof_cor <= 0:
         raise StarTrackerAccuracyError("no residual degrees of freedom: fewer harmonics are needed")
-    return _Residuals(rows, seg_index, z_all, z_fit_all, e_raw, e_eq2, e_cor, motion, w_S, tuple(seg_out),
-                      dof_raw, dof_cor)
+    ok = rows[~outlier[rows]]
+    return _Residuals(rows, ok, outlier, seg_index, z_all, z_fit_all, e_raw, e_eq2, e_cor, motion, w_S,
+                      tuple(seg_out), dof_raw, dof_cor)
 
 
 @dataclass(frozen=True)
@@ -357,8 +402,9 @@ def _robust(resid: NDArray, n: int, dof: int) -> NDArray:
 
 
 def _sigmas(res: _Residuals, have_gyro: bool) -> _Sigmas:
-    """Step 3: sigmas pooled over segments with the least-squares degrees of freedom (module docstring)."""
-    rows = res.rows
+    """Step 3: sigmas pooled over segments with the least-squares degrees of freedom (module docstring),
+    over the accepted samples."""
+    rows = res.ok
     rss_raw = np.sum([s.rss_smoothing_rad2 for s in res.segments], axis=0)
     rss_cor = np.sum([s.rss_rad2 for s in res.segments], axis=0)
     sigma = _pooled(rss_cor, res.dof_cor)
@@ -371,8 +417,8 @@ def _sigmas(res: _Residuals, have_gyro: bool) -> _Sigmas:
         smoothing=sigma_smoothing,
         robust=_robust(res.e_cor[rows], rows.size, res.dof_cor),
         smoothing_robust=_robust(res.e_raw[rows], rows.size, res.dof_raw),
-        eq2=_pooled(np.nansum(res.e_eq2**2, axis=0), res.dof_raw),
-        motion_rms=np.sqrt(np.mean(res.motion[rows] ** 2, axis=0)),
+        eq2=_pooled(np.sum(res.e_eq2[rows] ** 2, axis=0), res.dof_raw),
+        motion_rms=np.sqrt(np.mean(res.motion[res.rows] ** 2, axis=0)),
     )
 
 
@@ -389,8 +435,9 @@ def _spectra(
     cutoff_hz: float, line_false_alarm: float,
 ) -> _Spectra:
     """Step 6 (003 §1.5): spectra of the gyro rates, star-tracker rates and residuals; residual lines
-    above the cutoff, marked as removed when at the alias of a gyro line."""
-    t_ns, rows = inp.t_ns, res.rows
+    above the cutoff, marked as removed when at the alias of a gyro line removed from the star tracker.
+    Accepted samples only."""
+    t_ns, rows = inp.t_ns, res.ok
     spectra: dict[str, Spectrum] = {}
     t_rows = seconds_since(t_ns[rows], int(t_ns[rows[0]]))
     spectra["star_tracker_residuals"] = amplitude_spectrum_of_samples(t_rows, res.e_raw[rows], oversample=2)
@@ -402,7 +449,7 @@ def _spectra(
         )
     else:
         spectra["star_tracker_rate"] = amplitude_spectrum_of_samples(t_rows, w_B[rows])
-    line_fits = gyro.lines.fits if gyro is not None else ()
+    line_fits = gyro.removed_fits if gyro is not None else ()
     gyro_aliases = [float(alias_frequency(lf.freq_hz, inp.sample_period_s)) for lf in line_fits]
     st_res = spectra["star_tracker_residuals"].resolution_hz
     found, _ = find_lines(t_rows, res.e_raw[rows], min_freq_hz=cutoff_hz, false_alarm=line_false_alarm)
@@ -416,6 +463,41 @@ def _spectra(
                 "star_tracker", f"x{k + 1}", sf.freq_hz, None, amp, amp / np.sqrt(2.0), sf.freq_hz, removed,
             ))
     return _Spectra(spectra, tuple(lines))
+
+
+@dataclass(frozen=True)
+class _Quality:
+    """Step 3b per axis (3,): the whiteness test, sigma above the cutoff, the lower bound of sigma, the
+    dof of its interval and the 95 % interval (3, 2) rad."""
+
+    whiteness: Whiteness
+    above: NDArray
+    lower: NDArray
+    dof: NDArray
+    ci95: NDArray
+
+
+def _quality(inp: _Inputs, res: _Residuals, sigma: NDArray, lines: tuple[SpectralLine, ...]) -> _Quality:
+    """Step 3b (processing.star_tracker.whiteness) on the corrected residuals of the accepted samples,
+    star-tracker residual lines left out of the test band."""
+    series = []
+    for s in res.segments:
+        sl = slice(s.start, s.stop)
+        series.append(ResidualSeries(seconds_since(inp.t_ns[sl], int(inp.t_ns[s.start])), res.e_cor[sl],
+                                     ~res.outlier[sl], s.cutoff_hz))
+    wt = whiteness_test(series, inp.sample_period_s, [x.freq_hz for x in lines if x.source == "star_tracker"])
+    rss = np.sum([s.rss_rad2 for s in res.segments], axis=0)
+    above = np.sqrt(rss / res.ok.size)
+    dof = np.full(3, float(res.dof_cor)) * (wt.dof_factor if wt.correlated else 1.0)
+    lower = sigma.copy()
+    if wt.correlated:
+        n_low, n_high = wt.dof_low / 2.0, wt.dof_high / 2.0
+        r = np.maximum(wt.ratio * (n_low + n_high) / (wt.ratio * n_low + n_high), 1.0)  # lower half / band level
+        n_seg = np.array([s.stop - s.start for s in res.segments], dtype=float)
+        f_c = float(np.average([s.cutoff_hz for s in res.segments], weights=n_seg))
+        f_nyq = 0.5 / inp.sample_period_s
+        lower = np.maximum(sigma, above * np.sqrt(1.0 + r * f_c / max(f_nyq - f_c, 1e-12)))
+    return _Quality(wt, above, lower, dof, sigma_interval(sigma, dof))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -435,6 +517,7 @@ def analyze_star_tracker_accuracy(
     max_gap_s: float = 120.0,
     method: Method = "auto",
     line_false_alarm: float = 1e-3,
+    outlier_alpha: float = OUTLIER_ALPHA,
     progress: Progress | None = None,
 ) -> StarTrackerAccuracy:
     """Accuracy of a star tracker from its own quaternions, with gyro rates when given (003 §1.3-1.5).
@@ -443,12 +526,13 @@ def analyze_star_tracker_accuracy(
     mounting (v_B = q_BS o v_S o q_BS^-1). Optional gyro: gyro_time_tai_ns (K,), w_G_rad_s (K, 3) in
     the gyro frame, q_BG (4,). harmonics: M for every segment, or None for the automatic choice.
     segment_max_s, max_gap_s [s]: segmentation; method: "auto" | "dst" | "lstsq" for the smoother;
-    line_false_alarm: false-alarm probability of the line detector per spectrum and axis.
+    line_false_alarm: false-alarm probability of the line detector per spectrum and axis;
+    outlier_alpha: probability that clean data lose a sample to the outlier rejection (0: none rejected).
     See the module docstring for every step. Returns :class:`StarTrackerAccuracy`.
     """
     report = progress or _noop
     inp = _check_inputs(time_tai_ns, q_IS, q_BS, harmonics)
-    smoothed = _smooth_segments(inp, harmonics, segment_max_s, max_gap_s, method)  # 1-2
+    smoothed = _smooth_segments(inp, harmonics, segment_max_s, max_gap_s, method, outlier_alpha)  # 1-2b
     segments, notes = smoothed.segments, list(smoothed.notes)
     report(0.3, "smoothing")
     cutoff_hz = max(seg.fit_raw.cutoff_hz for seg in segments)
@@ -456,7 +540,7 @@ def analyze_star_tracker_accuracy(
     if gyro_time_tai_ns is not None and w_G_rad_s is not None:  # 5, 7
         g_ns, w_B_gyro = _gyro_rates(gyro_time_tai_ns, w_G_rad_s, q_BG)
         gyro = analyze_gyro(segments, inp.t_ns, g_ns, w_B_gyro, inp.dcm_BS, cutoff_hz, inp.sample_period_s,
-                            line_false_alarm)
+                            line_false_alarm, smoothed.rejection.scale_rad)
         if gyro is None:
             notes.append("gyro data do not cover the star-tracker segments densely enough: not used")
     report(0.5, "gyro lines")
@@ -474,12 +558,17 @@ def analyze_star_tracker_accuracy(
         gyro.lines.fits,
     )
     spec = _spectra(inp, res, w_B, gyro, cmp, cutoff_hz, line_false_alarm)  # 6
+    quality = _quality(inp, res, sig.sigma, spec.lines)  # 3b
     report(0.9, "spectra")
     return StarTrackerAccuracy(
         time_tai_ns=inp.t_ns, segment=res.segment, z=res.z, z_fit=res.z_fit, residuals_smoothing_rad=res.e_raw,
         residuals_eq2_rad=res.e_eq2, residuals_rad=res.e_cor, motion_rad=res.motion, w_S_rad_s=res.w_S,
         w_B_rad_s=w_B, sigma_rad=sig.sigma, sigma_smoothing_rad=sig.smoothing, sigma_robust_rad=sig.robust,
         sigma_smoothing_robust_rad=sig.smoothing_robust, sigma_eq2_rad=sig.eq2, motion_rms_rad=sig.motion_rms,
+        outlier=res.outlier, outlier_threshold=smoothed.rejection.threshold,
+        outlier_scale_rad=smoothed.rejection.scale_rad, whiteness=quality.whiteness,
+        sigma_above_cutoff_rad=quality.above, sigma_lower_bound_rad=quality.lower, sigma_dof=quality.dof,
+        sigma_ci95_rad=quality.ci95, line_coherence=gyro.coherence if gyro is not None else (),
         segments=res.segments, sample_period_s=inp.sample_period_s, gyro=cmp,
         lines=(gyro.lines.lines if gyro is not None else ()) + spec.lines, spectra=spec.spectra, notes=tuple(notes),
     )

@@ -7,7 +7,18 @@ processing.star_tracker.accuracy.
    the fit's derivative, :func:`rate_noise_factor`, and the gyro noise).
 7. Real motion (003 §1.5): lines above the smoother's cutoff in the gyro smoothing residuals
    (:func:`find_gyro_lines`), fitted per segment and integrated into the attitude oscillation about the
-   sensor axes (:func:`segment_motion`) that the accuracy analysis removes from the measurements.
+   sensor axes (:func:`segment_line_motions`) that the accuracy analysis removes from the measurements,
+   but only the lines the star tracker sees (:func:`line_coherence`): a line in the gyro output alone
+   (a vibration of the gyro or its mounting, an electronic tone) is not attitude motion, and removing
+   it would add its oscillation to the star-tracker residuals (~40 % more sigma in the issue-17 case).
+   Each line's predicted oscillation theta_j(t_n), minus its own sine-series smoothing (the part the
+   fit would absorb anyway), is regressed jointly on the raw star-tracker residuals, the axes weighted
+   by the robust noise scale: e = sum_j beta_j theta_j + noise. Real motion has beta = 1. A line is
+   removed when it is coherent (beta / sigma_beta > LINE_Z) and the removal reduces the residuals
+   (|e - theta|^2 < |e|^2, i.e. beta > 1/2); it is flagged ``gyro_only`` when it is not removed and
+   beta is significantly below 1 ((1 - beta) / sigma_beta > LINE_Z). sigma_beta from the regression's own
+   residual scatter. Lines too weak in the star tracker to tell (neither) are not removed either: their
+   effect on the sigma is then within its noise.
 
 The per-segment gyro fit is computed once (with the harmonic count of the raw star-tracker fit) and
 reused by the comparison whenever the final star-tracker fit implies the same gyro harmonic count.
@@ -17,32 +28,40 @@ Times int64 TAI ns or float seconds as named; rates rad/s, angles rad.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
 
+from processing.estimation.chi2 import chi2_isf
 from processing.signal.sine_series import SineSeriesSolver, fit_sine_series
 from processing.signal.sine_series_fit import SineSeriesFit
 from processing.signal.spectral import alias_frequency
 from processing.signal.spectral_lines import SinusoidFit, find_lines, fit_sinusoids, separable_frequencies
-from processing.star_tracker.smoothing import SegmentSmoothing, rate_from_mrp, seconds_since
+from processing.star_tracker.smoothing import SegmentSmoothing, rate_from_mrp, seconds_since, sensor_axis_residuals
 
 __all__ = [
     "GyroAnalysis",
     "GyroComparison",
     "GyroLines",
     "GyroSegmentFit",
+    "LINE_Z",
+    "LineCoherence",
     "SpectralLine",
     "analyze_gyro",
     "find_gyro_lines",
     "fit_gyro_segment",
     "gyro_comparison",
     "gyro_harmonics",
+    "line_coherence",
     "rate_noise_factor",
+    "segment_line_motions",
     "segment_lines",
     "segment_motion",
 ]
+
+LINE_Z = float(np.sqrt(chi2_isf(1e-3, 1)))
+"""|z| of a two-sided 0.1 % test (3.29): the significance of a line's coherence with the star tracker."""
 
 
 @dataclass(frozen=True)
@@ -188,17 +207,103 @@ def rate_noise_factor(solver: SineSeriesSolver, fit: SineSeriesFit) -> float:
     return float(np.sum(g_diag * weights))
 
 
+def segment_line_motions(
+    seg: SegmentSmoothing, gyro_fit: GyroSegmentFit | None, line_fits: Sequence[SinusoidFit], dcm_BS: NDArray
+) -> NDArray:
+    """Step 7 on one segment, per line: theta_S of each of the J lines (J, N, 3) rad about the sensor
+    axes (their sum is :func:`segment_motion`). A line merged into a stronger one at this segment's
+    resolution carries no motion of its own here (zeros); the stronger one carries both."""
+    n = seg.sl.stop - seg.sl.start
+    out = np.zeros((len(line_fits), n, 3))
+    if gyro_fit is None or not line_fits:
+        return out
+    tg = gyro_fit.t_s
+    freqs = np.array([lf.freq_hz for lf in line_fits])
+    for fs in fit_sinusoids(tg, gyro_fit.residuals, segment_lines(line_fits, tg)):
+        j = int(np.argmin(np.abs(freqs - fs.freq_hz)))
+        out[j] += fs.integral(seg.t_s) @ dcm_BS  # rows: dcm_SB theta_B = dcm_BS^T theta_B
+    return out
+
+
+@dataclass(frozen=True)
+class LineCoherence:
+    """A gyro line against the star tracker (:func:`line_coherence`): frequency [Hz], beta (1 for real
+    attitude motion, 0 for a line the star tracker does not see) and its sigma, whether it was removed
+    from the star-tracker measurements, whether it is significantly in the gyro only, and the rms of its
+    predicted oscillation about x1 x2 x3 (3,) rad."""
+
+    freq_hz: float
+    beta: float
+    beta_sigma: float
+    removed: bool
+    gyro_only: bool
+    predicted_rms_rad: NDArray
+
+
+def line_coherence(
+    segments: Sequence[SegmentSmoothing], motions: Sequence[NDArray], line_fits: Sequence[SinusoidFit],
+    scale_S: NDArray,
+) -> tuple[LineCoherence, ...]:
+    """The joint regression of the module docstring (step 7): per segment the raw residuals of the
+    accepted samples, the lines' oscillations motions[seg] (J, N, 3) minus their smoothing with the
+    segment's harmonics, axes weighted by 1 / scale_S (3,) rad."""
+    n_lines = len(line_fits)
+    if n_lines == 0:
+        return ()
+    ata = np.zeros((n_lines, n_lines))
+    atb = np.zeros(n_lines)
+    btb = 0.0
+    n_obs = 0
+    sq = np.zeros((n_lines, 3))
+    n_rows = 0
+    w = 1.0 / np.asarray(scale_S, dtype=np.float64)
+    for seg, m in zip(segments, motions, strict=True):
+        ok = seg.accepted
+        e = sensor_axis_residuals(seg.z, seg.fit_raw.fitted)[ok] * w
+        flat = np.moveaxis(m, 0, 1).reshape(m.shape[1], 3 * n_lines)  # (N, J*3)
+        perp = flat - seg.solver.fit(flat, seg.fit_raw.harmonics).fitted
+        a = perp[ok].reshape(-1, n_lines, 3) * w  # (n, J, 3)
+        ata += np.einsum("nji,nki->jk", a, a)
+        atb += np.einsum("nji,ni->j", a, e)
+        btb += float(np.sum(e * e))
+        n_obs += e.size
+        sq += np.sum(m[:, ok] ** 2, axis=1)
+        n_rows += int(np.count_nonzero(ok))
+    try:
+        cov = np.linalg.inv(ata)
+    except np.linalg.LinAlgError:
+        cov = np.linalg.pinv(ata)
+    beta = cov @ atb
+    s2 = max((btb - float(beta @ atb)) / max(n_obs - n_lines, 1), 0.0)
+    sig = np.sqrt(np.maximum(np.diag(cov), 0.0) * s2)
+    out = []
+    for j, lf in enumerate(line_fits):
+        b, sb = float(beta[j]), float(sig[j])
+        coherent = sb > 0 and b / sb > LINE_Z
+        removed = bool(coherent and b > 0.5)
+        gyro_only = bool(not removed and sb > 0 and (1.0 - b) / sb > LINE_Z)
+        out.append(LineCoherence(float(lf.freq_hz), b, sb, removed, gyro_only, np.sqrt(sq[j] / max(n_rows, 1))))
+    return tuple(out)
+
+
 @dataclass(frozen=True)
 class GyroAnalysis:
     """Steps 5 and 7 together: gyro times (K,) and body rates (K, 3), per star-tracker segment the gyro
     smoothing (None without enough gyro samples) and the attitude oscillation motion_S (N_seg, 3) to
-    remove, and the gyro lines."""
+    remove (the coherent lines only), the gyro lines (``removed`` set per line) and their coherence
+    with the star tracker."""
 
     time_tai_ns: NDArray
     w_B_rad_s: NDArray
     fits: tuple[GyroSegmentFit | None, ...]
     motion_S: tuple[NDArray, ...]
     lines: GyroLines
+    coherence: tuple[LineCoherence, ...] = ()
+
+    @property
+    def removed_fits(self) -> tuple[SinusoidFit, ...]:
+        """The line fits removed from the star tracker (coherent with it)."""
+        return tuple(lf for lf, c in zip(self.lines.fits, self.coherence, strict=True) if c.removed)
 
 
 def _gyro_index(seg: SegmentSmoothing, t_ns: NDArray, g_ns: NDArray) -> NDArray | None:
@@ -210,19 +315,28 @@ def _gyro_index(seg: SegmentSmoothing, t_ns: NDArray, g_ns: NDArray) -> NDArray 
 
 def analyze_gyro(
     segments: Sequence[SegmentSmoothing], t_ns: NDArray, g_ns: NDArray, w_B: NDArray, dcm_BS: NDArray,
-    cutoff_hz: float, sample_period_s: float, false_alarm: float,
+    cutoff_hz: float, sample_period_s: float, false_alarm: float, scale_S: NDArray | None = None,
 ) -> GyroAnalysis | None:
     """Steps 5 and 7 for the star-tracker segments (times t_ns (N,)) and gyro rates w_B (K, 3) at g_ns (K,):
-    smoothing per segment, lines above cutoff_hz, the attitude oscillation per segment. None when the
-    gyro samples cover no segment densely enough."""
+    smoothing per segment, lines above cutoff_hz, the attitude oscillation per segment of the lines
+    coherent with the star tracker (scale_S (3,) rad: its noise scale per sensor axis for the coherence
+    regression; None: every line removed, no test). None when the gyro samples cover no segment densely
+    enough."""
     index = [_gyro_index(seg, t_ns, g_ns) for seg in segments]
     if all(idx is None for idx in index):
         return None
     fits = tuple(None if idx is None else fit_gyro_segment(seg, idx, g_ns, w_B, seg.fit_raw)
                  for seg, idx in zip(segments, index, strict=True))
     lines = find_gyro_lines([f for f in fits if f is not None], g_ns, cutoff_hz, sample_period_s, false_alarm)
-    motion = tuple(segment_motion(seg, f, lines.fits, dcm_BS) for seg, f in zip(segments, fits, strict=True))
-    return GyroAnalysis(g_ns, w_B, fits, motion, lines)
+    per_line = [segment_line_motions(seg, f, lines.fits, dcm_BS) for seg, f in zip(segments, fits, strict=True)]
+    if scale_S is None:
+        coherence = tuple(LineCoherence(lf.freq_hz, 1.0, 0.0, True, False, np.zeros(3)) for lf in lines.fits)
+    else:
+        coherence = line_coherence(segments, per_line, lines.fits, scale_S)
+    keep = np.array([c.removed for c in coherence], dtype=bool)
+    motion = tuple(np.sum(m[keep], axis=0) if keep.any() else np.zeros(m.shape[1:]) for m in per_line)
+    flagged = tuple(replace(line, removed=bool(keep[i // 3])) for i, line in enumerate(lines.lines))
+    return GyroAnalysis(g_ns, w_B, fits, motion, GyroLines(lines.fits, flagged), coherence)
 
 
 @dataclass(frozen=True)

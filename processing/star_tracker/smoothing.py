@@ -126,7 +126,8 @@ def split_segments(time_tai_ns: ArrayLike, segment_max_s: float, max_gap_s: floa
 class SegmentSmoothing:
     """Steps 1-2 on one segment: rows ``sl`` of the samples, times t_s (N,) [s] since its first sample
     t0_ns, quaternions q (N, 4), mean q_c (4,), MRPs z (N, 3), the solver (one factorisation for every
-    fit at these times), whether M is automatic, and the fit of z (``fit_raw``)."""
+    fit at these times), whether M is automatic, the fit of z (``fit_raw``) and the samples the fits use
+    (``accepted`` (N,) bool: False for rejected outliers, which have zero weight in the solver)."""
 
     sl: slice
     t_s: NDArray
@@ -137,6 +138,7 @@ class SegmentSmoothing:
     solver: SineSeriesSolver
     auto: bool
     fit_raw: SineSeriesFit
+    accepted: NDArray
 
     def smooth(self, z: NDArray) -> SineSeriesFit:
         """Fit other MRPs z (N, 3) at the same times, M chosen the same way (e.g. corrected data)."""
@@ -148,14 +150,21 @@ def _smooth(solver: SineSeriesSolver, z: NDArray, auto: bool) -> SineSeriesFit:
 
 
 def smooth_segment(
-    sl: slice, t_s: NDArray, t0_ns: int, q: NDArray, harmonics: int | None, method: Method
+    sl: slice, t_s: NDArray, t0_ns: int, q: NDArray, harmonics: int | None, method: Method,
+    accepted: NDArray | None = None,
 ) -> SegmentSmoothing:
     """Steps 1-2 (003 §1.3) on the samples q (N, 4) at t_s (N,) [s] of one segment: mean quaternion,
     MRPs, and their sine-series fit with M = ``harmonics`` or automatic (None, capped at (N - 2) // 4).
-    The caller checks harmonics <= N - 2."""
+    The caller checks harmonics <= N - 2. ``accepted`` (N,) bool: the samples to fit (None: all); the
+    others get zero weight (general least-squares route: the DST needs every sample)."""
     n = t_s.size
-    q_c = mean_quaternion(q)
+    ok = np.ones(n, dtype=bool) if accepted is None else np.asarray(accepted, dtype=bool)
+    q_c = mean_quaternion(q[ok])
     z = residual_mrps(q, q_c)
     top = (n - 2) // 4 if harmonics is None else harmonics
-    solver = SineSeriesSolver(t_s, top, method=method)
-    return SegmentSmoothing(sl, t_s, t0_ns, q, q_c, z, solver, harmonics is None, _smooth(solver, z, harmonics is None))
+    if np.all(ok):
+        solver = SineSeriesSolver(t_s, top, method=method)
+    else:
+        solver = SineSeriesSolver(t_s, top, weights=ok.astype(np.float64), method="lstsq")
+    return SegmentSmoothing(sl, t_s, t0_ns, q, q_c, z, solver, harmonics is None,
+                            _smooth(solver, z, harmonics is None), ok)
