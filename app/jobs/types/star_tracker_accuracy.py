@@ -2,7 +2,10 @@
 
 Thin layer over :func:`processing.star_tracker.accuracy.analyze_star_tracker_accuracy`: picks the
 sensor and its mounting from the configuration, the gyro stream when present, converts radians to
-arcseconds at the edge and draws the report figures in the spirit of 003 figures 1-5.
+arcseconds at the edge and draws the report figures in the spirit of 003 figures 1-5. Its statements
+about itself (issue 17) are warnings: ``outliers_removed``, ``correlated_residuals``, ``implausible_input``
+(a gyro line the star tracker does not see), and those of the star-tracker-against-gyro plausibility
+check (app.jobs.plausibility.check_heads) when gyro data are used.
 """
 
 from __future__ import annotations
@@ -13,6 +16,7 @@ import numpy as np
 from matplotlib.figure import Figure
 from pydantic import BaseModel, ConfigDict, Field
 
+from app.jobs.plausibility import HeadSamples, check_heads
 from app.jobs.registry import JobType
 from app.reports.headline import Answer
 from processing.star_tracker.accuracy import (
@@ -20,11 +24,13 @@ from processing.star_tracker.accuracy import (
     StarTrackerAccuracyError,
     analyze_star_tracker_accuracy,
 )
-from processing.tasks import Progress, TaskError, TaskInputs, TaskResult
+from processing.tasks import Progress, ResultWarning, TaskError, TaskInputs, TaskResult
 from processing.units import ARCSEC_PER_RAD, NS_PER_S
 
 MAX_GYRO_TABLE_ROWS = 20_000
 """The gyro comparison table is decimated (every k-th sample) to at most this many rows."""
+SUMMARY_OUTLIERS = 5
+"""The summary lists at most this many outliers (the largest); the ``outliers`` table has them all."""
 SPECTRUM_ZOOM_FACTOR = 4.0
 """Zoomed spectra span 0 .. this x the smoother's cutoff frequency (003 figs. 3-5, lower panels)."""
 
@@ -108,6 +114,7 @@ def _summary(r: StarTrackerAccuracy, sensor: str, params: Params, gyro_used: boo
         "gyro_used": gyro_used,
         "spectral_lines": [_line_entry(line) for line in r.lines],
     }
+    summary.update(_robustness_summary(r))
     if r.gyro is not None:
         g = r.gyro
         summary.update(
@@ -119,6 +126,98 @@ def _summary(r: StarTrackerAccuracy, sensor: str, params: Params, gyro_used: boo
             gyro_axes=["y1", "y2", "y3"],
         )
     return summary
+
+
+def _outlier_rows(r: StarTrackerAccuracy) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Rows of the outliers, their residuals (n, 3) and sizes (n,) in arcsec (raw residuals)."""
+    idx = np.flatnonzero(r.outlier)
+    e = r.residuals_smoothing_rad[idx] * ARCSEC_PER_RAD
+    return idx, e, np.linalg.norm(e, axis=1)
+
+
+def _robustness_summary(r: StarTrackerAccuracy) -> dict[str, Any]:
+    """Outliers, whiteness, sigma above the cutoff, its lower bound and interval, gyro-line coherence."""
+    a = ARCSEC_PER_RAD
+    idx, e, size = _outlier_rows(r)
+    largest = np.argsort(-size, kind="stable")[:SUMMARY_OUTLIERS]
+    w = r.whiteness
+    return {
+        "n_outliers": int(idx.size),
+        "outlier_threshold_sigma": float(r.outlier_threshold) if np.isfinite(r.outlier_threshold) else None,
+        "outlier_scale_arcsec": _as_list(r.outlier_scale_rad, a),
+        "outliers": [{"time_tai_ns": int(r.time_tai_ns[idx[k]]), "residual_arcsec": _as_list(e[k]),
+                      "size_arcsec": float(size[k])} for k in largest],
+        "sigma_ci95_arcsec": [_as_list(row, a) for row in r.sigma_ci95_rad],
+        "sigma_dof": _as_list(r.sigma_dof),
+        "sigma_above_cutoff_arcsec": _as_list(r.sigma_above_cutoff_rad, a),
+        "sigma_lower_bound_arcsec": _as_list(r.sigma_lower_bound_rad, a),
+        "whiteness_p_value": _as_list(w.p_value),
+        "whiteness_power_ratio": _as_list(w.ratio),
+        "residuals_white": (not w.correlated) if w.tested else None,
+        "gyro_lines": [{"freq_hz": c.freq_hz, "beta": c.beta, "beta_sigma": c.beta_sigma, "removed": c.removed,
+                        "gyro_only": c.gyro_only, "predicted_rms_arcsec": _as_list(c.predicted_rms_rad, a)}
+                       for c in r.line_coherence],
+    }
+
+
+def _warnings(r: StarTrackerAccuracy, summary: dict[str, Any]) -> list[ResultWarning]:
+    """outliers_removed, correlated_residuals and implausible_input (gyro-only lines)."""
+    out: list[ResultWarning] = []
+    a = ARCSEC_PER_RAD
+    n = summary["n_outliers"]
+    if n:
+        idx, _, size = _outlier_rows(r)
+        out.append(ResultWarning(
+            "outliers_removed",
+            f"{n} of {summary['n_samples']} star-tracker samples rejected as outliers (residual beyond "
+            f"{r.outlier_threshold:.1f} robust sigma, largest {float(size.max()):.1f}\"): left out of every fit, "
+            "sigma and spectrum; the 'outliers' table lists them. Check the sensor's validity flags for them.",
+            {"n_outliers": n, "n_samples": summary["n_samples"],
+             "threshold_sigma": float(r.outlier_threshold), "largest_arcsec": float(size.max()),
+             "first_time_tai_ns": int(r.time_tai_ns[idx[0]])},
+        ))
+    w = r.whiteness
+    if w.correlated:
+        axes = [f"x{i + 1}" for i in range(3) if w.p_value[i] < w.alpha / 3.0]
+        sig = summary["sigma_arcsec"]
+        above = summary["sigma_above_cutoff_arcsec"]
+        lower = summary["sigma_lower_bound_arcsec"]
+        out.append(ResultWarning(
+            "correlated_residuals",
+            f"the star-tracker residuals are not white about {', '.join(axes)}: above the smoother cutoff "
+            f"({summary['cutoff_hz']:.4f} Hz) their power rises towards the cutoff (lower/upper half-band ratio "
+            f"{', '.join(f'{x:.2f}' for x in w.ratio)}; white noise gives 1). Time-correlated noise below the "
+            "cutoff is absorbed by the harmonics together with the motion, so sigma_arcsec "
+            f"({', '.join(f'{x:.2f}' for x in sig)}\") is a lower bound: the noise above the cutoff alone is "
+            f"{', '.join(f'{x:.2f}' for x in above)}\", the lower band's level continued below the cutoff gives "
+            f"at least {', '.join(f'{x:.2f}' for x in lower)}\", and the true sigma may be several times larger "
+            "(these data cannot tell: fewer harmonics, a longer arc with known motion or the sensor's noise "
+            "model would). The intervals use the effective degrees of freedom.",
+            {"p_value": _as_list(w.p_value), "power_ratio": _as_list(w.ratio), "alpha": w.alpha,
+             "band_hz": list(w.band_hz), "sigma_above_cutoff_arcsec": above, "sigma_lower_bound_arcsec": lower,
+             "dof_effective": _as_list(r.sigma_dof)},
+        ))
+    for c in r.line_coherence:
+        if c.gyro_only:
+            out.append(ResultWarning(
+                "implausible_input",
+                f"the gyro line at {c.freq_hz:.4f} Hz is not in the star-tracker measurements (coherence beta = "
+                f"{c.beta:.2f} +- {c.beta_sigma:.2f}; real attitude motion gives 1; predicted oscillation "
+                f"{', '.join(f'{x * a:.2f}' for x in c.predicted_rms_rad)}\" rms about x1 x2 x3): it is in the gyro "
+                "only (a vibration of the gyro or its mounting, or an electronic tone) and was not removed from "
+                "the star tracker.",
+                {"freq_hz": c.freq_hz, "beta": c.beta, "beta_sigma": c.beta_sigma,
+                 "predicted_rms_arcsec": _as_list(c.predicted_rms_rad, a)},
+            ))
+    return out
+
+
+def _plausibility(sensor: str, t: np.ndarray, q: np.ndarray, q_BS: np.ndarray,
+                  gyro: tuple[np.ndarray, np.ndarray, np.ndarray], notes: list[str]) -> tuple[dict[str, Any],
+                                                                                            list[ResultWarning]]:
+    """The star tracker checked against the gyro (app.jobs.plausibility.check_heads)."""
+    return check_heads([HeadSamples(sensor, t, q, np.asarray(q_BS, dtype=np.float64))], gyro[0], gyro[1],
+                       np.asarray(gyro[2], dtype=np.float64), notes)
 
 
 def _tables(r: StarTrackerAccuracy) -> dict[str, dict[str, np.ndarray]]:
@@ -140,6 +239,9 @@ def _tables(r: StarTrackerAccuracy) -> dict[str, dict[str, np.ndarray]]:
     for i in range(3):
         rates[f"w{i + 1}_S_arcsec_s"] = r.w_S_rad_s[rows, i] * a
     tables = {"residuals": res, "rates": rates}
+    idx, e_out, size = _outlier_rows(r)
+    tables["outliers"] = {"time_tai_ns": r.time_tai_ns[idx], **{f"e{i + 1}_arcsec": e_out[:, i] for i in range(3)},
+                          "size_arcsec": size}
     if r.gyro is not None:
         step = max(1, int(np.ceil(r.gyro.time_tai_ns.size / MAX_GYRO_TABLE_ROWS)))
         g = {"time_tai_ns": r.gyro.time_tai_ns[::step]}
@@ -197,10 +299,15 @@ def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
         "gyro lines above the smoother cutoff; sigma_smoothing_arcsec: the 003 §1.4 figure with that motion in; "
         "residuals are exact small rotations about x1 x2 x3 (sigma_eq2_arcsec: 003 eq. 2 literally)"
     )
+    summary = _summary(result, sensor, params, result.gyro is not None)
+    warnings: list[ResultWarning] = []
+    if gyro is not None:
+        summary["plausibility"], warnings = _plausibility(sensor, t[keep], q[keep], q_BS, gyro, notes)
     return TaskResult(
-        summary=_summary(result, sensor, params, result.gyro is not None),
+        summary=summary,
         tables=_tables(result),
         notes=notes,
+        warnings=warnings + _warnings(result, summary),
     )
 
 
