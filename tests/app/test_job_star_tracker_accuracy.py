@@ -145,3 +145,49 @@ def test_sensor_choice_and_errors():
         JOB.run(inputs(sc, streams={"star_tracker": short}), JOB.params(), no_progress)
     with pytest.raises(TaskError, match="harmonics must be <= N - 2"):
         JOB.run(inputs(sc, streams={"star_tracker": st}), JOB.params(harmonics=500), no_progress)
+
+
+def test_robustness_keys_and_no_warning_on_clean_data(default_result):
+    _, result = default_result
+    s = result.summary
+    assert result.warnings == []
+    assert s["n_outliers"] == 0 and s["outliers"] == [] and result.tables["outliers"]["time_tai_ns"].size == 0
+    assert s["residuals_white"] is True and all(0.0 < p <= 1.0 for p in s["whiteness_p_value"])
+    for key in ("sigma_above_cutoff_arcsec", "sigma_lower_bound_arcsec", "sigma_dof", "whiteness_power_ratio",
+                "outlier_scale_arcsec"):
+        assert isinstance(s[key], list) and len(s[key]) == 3 and all(isinstance(v, float) for v in s[key]), key
+    for (lo, hi), sig in zip(s["sigma_ci95_arcsec"], s["sigma_arcsec"], strict=True):
+        assert lo < sig < hi
+    assert [(line["removed"], line["gyro_only"]) for line in s["gyro_lines"]] == [(True, False)]
+    assert s["plausibility"]["st1"]["checked"] is True
+
+
+def test_outliers_and_a_gyro_only_line_are_reported():
+    sc = scenario(seed=2, st_outlier_fraction=0.01, gyro_line_amplitude_rad_s=(10 / 206264.806,) * 3)
+    result = JOB.run(inputs(sc), JOB.params(), no_progress)
+    s = result.summary
+    assert_json_plain(s)
+    json.dumps(s, allow_nan=False)
+    n_true = int(sc.truth.st_outlier_mask.sum())
+    assert s["n_outliers"] == n_true and len(s["outliers"]) == min(n_true, 5)
+    table = result.tables["outliers"]
+    assert set(table) == {"time_tai_ns", "e1_arcsec", "e2_arcsec", "e3_arcsec", "size_arcsec"}
+    np.testing.assert_array_equal(table["time_tai_ns"], sc.truth.st_time_tai_ns[sc.truth.st_outlier_mask])
+    np.testing.assert_allclose(table["size_arcsec"], 300.0, atol=40.0)
+    np.testing.assert_allclose(s["sigma_arcsec"], [2.5, 5.0, 15.0], rtol=0.12)
+    codes = [w.code for w in result.warnings]
+    assert "outliers_removed" in codes and "implausible_input" in codes
+    gyro_only = [w for w in result.warnings if w.code == "implausible_input" and "gyro only" in w.message]
+    assert len(gyro_only) == 1 and gyro_only[0].evidence["freq_hz"] == pytest.approx(0.25, abs=1e-3)
+    assert {(round(x["freq_hz"], 2), x["removed"]) for x in s["gyro_lines"]} == {(0.25, False), (0.4, True)}
+
+
+def test_gauss_markov_noise_raises_correlated_residuals():
+    sc = scenario(seed=3, duration_s=900.0, st_noise_tau_s=30.0)
+    result = JOB.run(inputs(sc, streams={"star_tracker": sc.streams["star_tracker"]}), JOB.params(), no_progress)
+    s = result.summary
+    assert s["residuals_white"] is False and "plausibility" not in s
+    (w,) = [w for w in result.warnings if w.code == "correlated_residuals"]
+    assert "lower bound" in w.message
+    assert all(lb >= sig for lb, sig in zip(s["sigma_lower_bound_arcsec"], s["sigma_arcsec"], strict=True))
+    assert s["sigma_arcsec"][2] < 0.5 * 15.0  # the failure the warning is about: the harmonics absorb the noise
