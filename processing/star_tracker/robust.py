@@ -8,12 +8,21 @@ robust by hard rejection iterated to a fixed point:
 1. fit every segment (all samples), residuals e_n about the sensor axes x1 x2 x3;
 2. robust scale per axis, pooled over segments: s_i = 1.4826 MAD(e_i) sqrt(n / dof) over the accepted
    samples (the dof factor as for the least-squares sigma);
-3. the normalised squared distance d_n^2 = sum_i (e_ni / s_i)^2 is chi-square with 3 dof for Gaussian
-   noise; a sample is rejected when d_n^2 > chi2_isf(alpha / n, 3): with ``alpha`` = 1 % a clean data
-   set loses a sample in about 1 % of the cases whatever its length (Bonferroni over the n samples);
+3. the normalised squared distance d_n^2 = sum_i (e_ni / s_i)^2 / (1 -+ h_n) (h_n the leverage of the
+   sample in the fit: an accepted residual has variance s^2 (1 - h), a rejected one, predicted by the
+   fit through the others, s^2 (1 + h); at a gap edge or segment end h approaches 1 and the fit follows
+   the sample) is chi-square with 3 dof for Gaussian noise; a sample is beyond the threshold when
+   d_n^2 > chi2_isf(alpha / n, 3): with ``alpha`` = 1 % a clean data set loses a sample in about 1 % of
+   the cases whatever its length (Bonferroni over the n samples). A sample beyond it is rejected when
+   it is the largest d of the accepted samples within the fit's resolution (+-N/(M + 2) samples) or
+   was rejected before: a 300" spike pulls the fit by tens of arcseconds at its neighbours, which must
+   not go with it (they would leave a hole in which the high harmonics are free and the fit wild, and
+   then never come back);
 4. refit the segments whose accepted set changed with zero weight on the rejected samples (general
    least-squares route; the harmonic count is chosen again), and repeat 2-4 until the accepted set no
-   longer changes (a rejected sample may come back; at most ``max_iterations``).
+   longer changes (a rejected sample comes back when its residual against the fit through the others
+   is within the threshold; a burst of adjacent outliers goes one per iteration; at most
+   ``max_iterations``).
 
 The rejected samples stay out of every later step (the fits, the sigmas, the spectra, the whiteness
 test); their residuals are still computed (against the fit through the accepted samples) and reported.
@@ -27,19 +36,20 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.linalg
 from numpy.typing import NDArray
 
 from processing.estimation.chi2 import chi2_isf
-from processing.signal.sine_series import Method
+from processing.signal.sine_series import Method, sine_series_design
 from processing.star_tracker.smoothing import SegmentSmoothing, sensor_axis_residuals, smooth_segment
 
-__all__ = ["MAD_TO_SIGMA", "OUTLIER_ALPHA", "OutlierRejection", "reject_outliers", "robust_scale"]
+__all__ = ["MAD_TO_SIGMA", "OUTLIER_ALPHA", "OutlierRejection", "leverage", "reject_outliers", "robust_scale"]
 
 MAD_TO_SIGMA = 1.482602218505602
 """1 / Phi^-1(3/4): MAD of a normal sample times this is its standard deviation."""
 OUTLIER_ALPHA = 0.01
 """Probability that a clean (Gaussian) data set loses any sample to the rejection."""
-MAX_ITERATIONS = 10
+MAX_ITERATIONS = 20
 
 
 @dataclass(frozen=True)
@@ -71,6 +81,33 @@ def robust_scale(residuals: Sequence[NDArray], accepted: Sequence[NDArray], dof:
     return MAD_TO_SIGMA * mad * np.sqrt(n / dof)
 
 
+def leverage(seg: SegmentSmoothing) -> NDArray:
+    """h_n = a_n^T (A_acc^T A_acc)^-1 a_n (N,) of every sample of the segment's fit (design rows a_n of
+    sine_series_design, A_acc those of the accepted samples): the hat-matrix diagonal for accepted
+    samples, the prediction-variance factor for the others."""
+    a = sine_series_design(seg.solver.tau, seg.fit_raw.harmonics, 0.0, 1.0)
+    r = scipy.linalg.qr(a[seg.accepted], mode="r", check_finite=False)[0][: a.shape[1]]
+    x = scipy.linalg.solve_triangular(r, a.T, trans="T", check_finite=False)
+    return np.sum(x * x, axis=0)
+
+
+def _accepted(seg: SegmentSmoothing, resid: NDArray, scale: NDArray, threshold: float) -> NDArray:
+    """Step 3 on one segment: the new accepted mask (N,) from residuals (N, 3), the scale (3,) and the
+    current mask."""
+    accepted = seg.accepted
+    d2 = np.sum((resid / scale) ** 2, axis=1)
+    if not np.any(d2 > threshold**2):
+        return np.ones(d2.size, dtype=bool)
+    h = np.clip(leverage(seg), 0.0, 1.0 - 1e-9)
+    d2 = d2 / np.where(accepted, 1.0 - h, 1.0 + h)
+    beyond = d2 > threshold**2
+    harmonics = seg.fit_raw.harmonics
+    w = max(1, int(np.ceil(d2.size / (harmonics + 2))))
+    padded = np.pad(np.where(accepted, d2, -np.inf), w, constant_values=-np.inf)  # among the accepted
+    local_max = d2 >= np.lib.stride_tricks.sliding_window_view(padded, 2 * w + 1).max(axis=1)
+    return ~(beyond & (local_max | ~accepted))
+
+
 def _residuals(seg: SegmentSmoothing) -> NDArray:
     return sensor_axis_residuals(seg.z, seg.fit_raw.fitted)
 
@@ -94,7 +131,7 @@ def reject_outliers(
         scale = robust_scale(resid, accepted, dof)
         if not np.isfinite(threshold) or not np.all(scale > 0):
             break
-        new = [np.sum((r / scale) ** 2, axis=1) <= threshold**2 for r in resid]
+        new = [_accepted(s, r, scale, threshold) for r, s in zip(resid, segs, strict=True)]
         changed = [i for i, (a, b) in enumerate(zip(accepted, new, strict=True))
                    if i not in frozen and not np.array_equal(a, b)]
         if not changed:
