@@ -13,7 +13,8 @@ Run: ``.venv/bin/python bench/star_tracker_robust.py [--seeds N] [--gyro-seeds K
   errors vs truth (and the figures without the rejection);
 - gyro_line: the default scenario (0.4 Hz real vibration) plus a 10"/s, 0.25 Hz line in the gyro only,
   with gyro data (K seeds): how often the line is kept out and flagged, the real one removed, sigma errors;
-- timing: H hours of seed-003 data with gyro (10 Hz) through the analysis (today's main: ~11 s for 24 h).
+- timing: H hours of seed-003 data with gyro (10 Hz) through the analysis (before issue 17: 5.5 s CPU
+  for 24 h, ~11 s wall on a quiet machine), and H hours of 1 Hz quaternions clean and with 1 % outliers.
 
 OpenBLAS is pinned to one thread unless OPENBLAS_NUM_THREADS is set (its pool makes small QRs slow on a
 shared 2-core machine; see bench/star_tracker_accuracy.py).
@@ -134,6 +135,29 @@ def timing(hours: float) -> None:
           f"outliers {r.n_outliers}, correlated {r.whiteness.correlated}")
 
 
+def timing_outliers_1hz(hours: float) -> None:
+    """H hours of 1 Hz quaternions (bench/star_tracker_accuracy.py's day) with 1 % of them 300" off:
+    every segment goes through the rejection and the general least-squares route."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from star_tracker_accuracy import day_of_quaternions
+
+    from processing.attitude import rotations
+
+    t, q, q_BS = day_of_quaternions(hours, 1.0)
+    rng = np.random.default_rng(1)
+    idx = rng.choice(t.size, t.size // 100, replace=False)
+    axis = rng.standard_normal((idx.size, 3))
+    axis *= 300.0 * RAD_PER_ARCSEC / np.linalg.norm(axis, axis=1, keepdims=True)
+    q_out = q.copy()
+    q_out[idx] = rotations.quat_multiply(q[idx], rotations.rotvec_to_quat(axis))
+    for name, qq in (("clean", q), ("1 % outliers", q_out)):
+        t0, c0 = time.perf_counter(), time.process_time()
+        r = analyze_star_tracker_accuracy(t, qq, q_BS)
+        dt, dc = time.perf_counter() - t0, time.process_time() - c0
+        print(f"timing: {hours:g} h at 1 Hz, {name}: {dt:.2f} s wall, {dc:.2f} s CPU; {r.n_outliers} rejected "
+              f"(of {idx.size if qq is q_out else 0}), routes {sorted({s.method for s in r.segments})}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seeds", type=int, default=200)
@@ -148,6 +172,7 @@ def main() -> None:
         print(f"  ({time.perf_counter() - t0:.0f} s)")
     if args.hours > 0:
         timing(args.hours)
+        timing_outliers_1hz(args.hours)
 
 
 if __name__ == "__main__":

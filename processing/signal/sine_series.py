@@ -321,6 +321,23 @@ class SineSeriesSolver:
         out = 0.5 * scipy.fft.dct(padded, type=1, axis=0) + np.reshape(fit.slope, -1)
         return out[:, 0] if fit.vector else out
 
+    def leverage(self, harmonics: int) -> NDArray:
+        """h_n = a_n^T (A^T W A)^-1 a_n (N,) for every sample's design row a_n (M = harmonics): the
+        hat-matrix diagonal (times w_n) where w_n > 0, and the prediction-variance factor of the fit at
+        the samples with zero weight (per unit noise variance). The general route reuses its QR; the DST
+        route (equal weights) factorises the design once here."""
+        m = _as_harmonics(harmonics, 0, self.max_harmonics, f"harmonics (prepared up to {self.max_harmonics})")
+        p = m + 2
+        if self.route == "dst":
+            design = sine_series_design(self.tau, m, 0.0, 1.0)
+            r = scipy.linalg.qr(design, mode="r", check_finite=False)[0][:p]
+            scale = 1.0 if self._w is None else float(np.sqrt(self._w[0]))
+            x = scipy.linalg.solve_triangular(r * scale, design.T, trans="T", check_finite=False)
+        else:
+            self._check_rank(m)
+            x = scipy.linalg.solve_triangular(self._r[:p, :p], self._design[:, :p].T, trans="T", check_finite=False)
+        return np.sum(x * x, axis=0)
+
     def covariance_diag(self, harmonics: int) -> NDArray:
         """diag((A^T W A)^-1) (M + 2,) of the design A = [1, tau, sin(pi m tau)] (tau-scaled slope):
         the coefficient variances per unit noise variance. Covariance of the fitted coefficients of a

@@ -36,14 +36,13 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.linalg
 from numpy.typing import NDArray
 
 from processing.estimation.chi2 import chi2_isf
-from processing.signal.sine_series import Method, sine_series_design
+from processing.signal.sine_series import Method
 from processing.star_tracker.smoothing import SegmentSmoothing, sensor_axis_residuals, smooth_segment
 
-__all__ = ["MAD_TO_SIGMA", "OUTLIER_ALPHA", "OutlierRejection", "leverage", "reject_outliers", "robust_scale"]
+__all__ = ["MAD_TO_SIGMA", "OUTLIER_ALPHA", "OutlierRejection", "reject_outliers", "robust_scale"]
 
 MAD_TO_SIGMA = 1.482602218505602
 """1 / Phi^-1(3/4): MAD of a normal sample times this is its standard deviation."""
@@ -81,24 +80,17 @@ def robust_scale(residuals: Sequence[NDArray], accepted: Sequence[NDArray], dof:
     return MAD_TO_SIGMA * mad * np.sqrt(n / dof)
 
 
-def leverage(seg: SegmentSmoothing) -> NDArray:
-    """h_n = a_n^T (A_acc^T A_acc)^-1 a_n (N,) of every sample of the segment's fit (design rows a_n of
-    sine_series_design, A_acc those of the accepted samples): the hat-matrix diagonal for accepted
-    samples, the prediction-variance factor for the others."""
-    a = sine_series_design(seg.solver.tau, seg.fit_raw.harmonics, 0.0, 1.0)
-    r = scipy.linalg.qr(a[seg.accepted], mode="r", check_finite=False)[0][: a.shape[1]]
-    x = scipy.linalg.solve_triangular(r, a.T, trans="T", check_finite=False)
-    return np.sum(x * x, axis=0)
-
-
-def _accepted(seg: SegmentSmoothing, resid: NDArray, scale: NDArray, threshold: float) -> NDArray:
+def _accepted(seg: SegmentSmoothing, resid: NDArray, scale: NDArray, threshold: float,
+              cache: dict[int, NDArray], key: int) -> NDArray:
     """Step 3 on one segment: the new accepted mask (N,) from residuals (N, 3), the scale (3,) and the
-    current mask."""
+    current mask; cache[key]: the segment's leverage (computed when first needed)."""
     accepted = seg.accepted
     d2 = np.sum((resid / scale) ** 2, axis=1)
     if not np.any(d2 > threshold**2):
         return np.ones(d2.size, dtype=bool)
-    h = np.clip(leverage(seg), 0.0, 1.0 - 1e-9)
+    if key not in cache:
+        cache[key] = np.clip(seg.solver.leverage(seg.fit_raw.harmonics), 0.0, 1.0 - 1e-9)
+    h = cache[key]
     d2 = d2 / np.where(accepted, 1.0 - h, 1.0 + h)
     beyond = d2 > threshold**2
     harmonics = seg.fit_raw.harmonics
@@ -125,13 +117,14 @@ def reject_outliers(
     scale = np.full(3, np.nan)
     iterations, converged = 0, True
     frozen: set[int] = set()  # segments that would keep too few samples: left as they are
+    lev: dict[int, NDArray] = {}  # leverage per segment of its current fit
     while True:
         accepted = [s.accepted for s in segs]
         dof = int(sum(s.fit_raw.dof for s in segs))
         scale = robust_scale(resid, accepted, dof)
         if not np.isfinite(threshold) or not np.all(scale > 0):
             break
-        new = [_accepted(s, r, scale, threshold) for r, s in zip(resid, segs, strict=True)]
+        new = [_accepted(s, r, scale, threshold, lev, i) for i, (r, s) in enumerate(zip(resid, segs, strict=True))]
         changed = [i for i, (a, b) in enumerate(zip(accepted, new, strict=True))
                    if i not in frozen and not np.array_equal(a, b)]
         if not changed:
@@ -148,4 +141,5 @@ def reject_outliers(
             segs[i] = smooth_segment(s.sl, s.t_s, s.t0_ns, s.q, None if s.auto else s.solver.max_harmonics,
                                      method, accepted=new[i])
             resid[i] = _residuals(segs[i])
+            lev.pop(i, None)
     return OutlierRejection(tuple(segs), tuple(resid), scale, threshold, iterations, converged)

@@ -201,3 +201,20 @@ def test_gyro_only_line_is_not_removed_and_flagged(seed):
     assert {(round(x.freq_hz, 2), x.removed) for x in gyro_rows} == {(0.25, False), (0.4, True)}
     # had the line been removed (as before issue 17), its oscillation would be added to the residuals
     assert np.all(fake.predicted_rms_rad[:2] > 0.5 * TRUTH[:2])
+
+
+@pytest.mark.parametrize("gappy", [False, True])
+def test_solver_leverage_is_the_hat_diagonal(gappy):
+    from processing.signal.sine_series import SineSeriesSolver, sine_series_design
+
+    t = np.arange(200) * 3.0
+    w = np.ones(t.size)
+    if gappy:
+        w[[0, 50, 51, 120]] = 0.0  # rejected samples (zero weight), one at the segment start
+    solver = SineSeriesSolver(t, 40, weights=w if gappy else None)
+    assert solver.route == ("lstsq" if gappy else "dst")
+    a = sine_series_design(t, 30, 0.0, t[-1])
+    info_inv = np.linalg.inv(a.T @ (w[:, None] * a))
+    expected = np.einsum("ij,jk,ik->i", a, info_inv, a)
+    np.testing.assert_allclose(solver.leverage(30), expected, rtol=1e-8, atol=1e-12)
+    assert abs(np.sum(expected * w) - 32) < 1e-8  # trace of the hat matrix = M + 2
