@@ -191,3 +191,13 @@ def test_gauss_markov_noise_raises_correlated_residuals():
     assert "lower bound" in w.message
     assert all(lb >= sig for lb, sig in zip(s["sigma_lower_bound_arcsec"], s["sigma_arcsec"], strict=True))
     assert s["sigma_arcsec"][2] < 0.5 * 15.0  # the failure the warning is about: the harmonics absorb the noise
+
+
+def test_figures_draw_with_outliers():
+    sc = scenario(seed=5, duration_s=600.0, st_outlier_fraction=0.02)
+    result = JOB.run(inputs(sc, streams={"star_tracker": sc.streams["star_tracker"]}), JOB.params(), no_progress)
+    assert result.summary["n_outliers"] > 0
+    fig = JOB.figures(result, JOB.params())["residuals"]
+    top = fig.axes[0]
+    assert max(abs(v) for v in top.get_ylim()) < 100.0  # the 300" outliers do not set the scale
+    assert any("outliers" in (line.get_label() or "") for line in top.get_lines())

@@ -348,11 +348,18 @@ def _fig_residuals(result: TaskResult) -> Figure:
     tm = _t_min(res["time_tai_ns"], int(res["time_tai_ns"][0]))
     fig = Figure(figsize=(9, 7), label="Smoothing residuals about the sensor axes (003 fig. 1b)")
     axes = fig.subplots(3, 1, sharex=True)
+    out_t = result.tables["outliers"]["time_tai_ns"] if "outliers" in result.tables else np.zeros(0, np.int64)
+    ok = ~np.isin(res["time_tai_ns"], out_t)  # the outliers would set the scale: marked at the axis edge
     for i, ax in enumerate(axes):
         sig_raw, sig = s["sigma_smoothing_arcsec"][i], s["sigma_arcsec"][i]
-        ax.plot(tm, res[f"e{i + 1}_arcsec"], lw=0.7, color="tab:gray", label="e (003 eq. 2)")
+        ax.plot(tm[ok], res[f"e{i + 1}_arcsec"][ok], lw=0.7, color="tab:gray", label="e (003 eq. 2)")
         if s["gyro_used"]:
-            ax.plot(tm, res[f"e{i + 1}_corrected_arcsec"], lw=0.7, color="tab:blue", label="real motion removed")
+            ax.plot(tm[ok], res[f"e{i + 1}_corrected_arcsec"][ok], lw=0.7, color="tab:blue",
+                    label="real motion removed")
+        if not ok.all():
+            top = ax.get_ylim()[1]
+            ax.plot(tm[~ok], np.full(int((~ok).sum()), top), "v", ms=5, color="tab:red",
+                    label=f"outliers ({int((~ok).sum())}, left out)")
         for v, style in ((sig_raw, "-"), (sig, "--")):
             if v is not None:
                 ax.axhline(v, color="tab:red", ls=style, lw=1)
