@@ -201,3 +201,12 @@ def test_figures_draw_with_outliers():
     top = fig.axes[0]
     assert max(abs(v) for v in top.get_ylim()) < 100.0  # the 300" outliers do not set the scale
     assert any("outliers" in (line.get_label() or "") for line in top.get_lines())
+
+
+def test_scalar_last_upload_is_named_by_the_plausibility_check():
+    sc = scenario(seed=7, duration_s=600.0)
+    st = dict(sc.streams["star_tracker"])
+    st["q0"], st["q1"], st["q2"], st["q3"] = st["q1"], st["q2"], st["q3"], st["q0"]  # (x, y, z, w) under q0..q3
+    result = JOB.run(inputs(sc, streams={**sc.streams, "star_tracker": st}), JOB.params(), no_progress)
+    assert result.summary["plausibility"]["st1"]["convention"] == "scalar_last"
+    assert "quaternion_convention" in [w.code for w in result.warnings]
