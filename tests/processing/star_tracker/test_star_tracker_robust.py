@@ -218,3 +218,20 @@ def test_solver_leverage_is_the_hat_diagonal(gappy):
     expected = np.einsum("ij,jk,ik->i", a, info_inv, a)
     np.testing.assert_allclose(solver.leverage(30), expected, rtol=1e-8, atol=1e-12)
     assert abs(np.sum(expected * w) - 32) < 1e-8  # trace of the hat matrix = M + 2
+
+
+def test_bursts_of_adjacent_outliers_are_rejected_one_per_pass():
+    from processing.attitude import rotations
+
+    for seed in range(4):
+        sc = quiet(seed)
+        st = sc.streams["star_tracker"]
+        q = np.column_stack([st[f"q{i}"] for i in range(4)])
+        idx = np.concatenate([np.arange(50, 53), np.arange(200, 203), np.arange(380, 383)])
+        rng = np.random.default_rng(seed)
+        axis = rng.standard_normal((idx.size, 3))
+        q[idx] = rotations.quat_multiply(q[idx], rotations.rotvec_to_quat(
+            200 * RAD_PER_ARCSEC * axis / np.linalg.norm(axis, axis=1, keepdims=True)))
+        r = analyze_star_tracker_accuracy(st["time_tai_ns"], q, sc.truth.q_BS)
+        np.testing.assert_array_equal(np.flatnonzero(r.outlier), idx)
+        assert np.all(np.abs(r.sigma_rad / TRUTH - 1) < 0.12)
