@@ -295,9 +295,10 @@ def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
     progress(0.95, "summary")
     notes += list(result.notes)
     notes.append(
-        "sigma_arcsec: residual std about the sensor axes after removing the attitude oscillation of the "
-        "gyro lines above the smoother cutoff; sigma_smoothing_arcsec: the 003 §1.4 figure with that motion in; "
-        "residuals are exact small rotations about x1 x2 x3 (sigma_eq2_arcsec: 003 eq. 2 literally)"
+        "sigma_arcsec: residual std about the sensor axes (outliers left out) after removing the attitude "
+        "oscillation of the gyro lines above the smoother cutoff that the star tracker also sees; "
+        "sigma_smoothing_arcsec: the 003 §1.4 figure with that motion in; residuals are exact small rotations "
+        "about x1 x2 x3 (sigma_eq2_arcsec: 003 eq. 2 literally)"
     )
     summary = _summary(result, sensor, params, result.gyro is not None)
     warnings: list[ResultWarning] = []
