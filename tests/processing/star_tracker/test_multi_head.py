@@ -119,7 +119,8 @@ def test_a_conjugated_head_or_wrong_mounting_is_called_out() -> None:
                       MultiHeadSettings(identical_heads=True))
     assert {"implausible_input", "correlated_residuals"} <= {w.code for w in multi_head_warnings(r)}
     wrong = HeadSeries("st2", hs[1].time_tai_ns, hs[1].q_IS, np.roll(M1.as_quat(), 1))
-    codes = [w.code for w in multi_head_warnings(analyze_heads([hs[0], wrong], MultiHeadSettings(identical_heads=True)))]
+    r_wrong = analyze_heads([hs[0], wrong], MultiHeadSettings(identical_heads=True))
+    codes = [w.code for w in multi_head_warnings(r_wrong)]
     assert "implausible_input" in codes
 
 
