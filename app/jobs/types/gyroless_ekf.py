@@ -20,7 +20,7 @@ from app.reports.headline import Answer
 from processing.gyroless.ekf import FilterTuning
 from processing.gyroless.estimation import GyrolessError, GyrolessResult, GyrolessSettings, estimate_gyroless_attitude
 from processing.star_tracker.orbital_attitude import angle_stats_deg
-from processing.tasks import Progress, TaskError, TaskInputs, TaskResult
+from processing.tasks import Progress, ResultWarning, TaskError, TaskInputs, TaskResult
 from processing.units import DEG_PER_RAD, NS_PER_S
 
 
@@ -105,6 +105,7 @@ def _summary(r: GyrolessResult, params: Params) -> dict[str, Any]:
         "whiteness": {"max_lag": int(wh.rho.shape[1]) if wh.rho.ndim == 2 else 0, "bound": wh.bound,
                       "fraction_outside": wh.fraction_outside, "max_abs_rho": wh.max_abs_rho,
                       "rho": wh.rho},
+        "consistency": _consistency(r),
         "innovation_rms_deg": {"magnetometer": rms(res[:, 0]), "sun_sensor": rms(res[:, 1])},
         "roll_deg": angle_stats_deg(r.roll_rad),
         "pitch_deg": angle_stats_deg(r.pitch_rad),
@@ -158,7 +159,32 @@ def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
     except (GyrolessError, ValueError) as exc:
         raise TaskError(str(exc)) from exc
     progress(0.9, "summary and tables")
-    return TaskResult(summary=_summary(r, params), tables=_tables(r), notes=list(r.notes))
+    return TaskResult(summary=_summary(r, params), tables=_tables(r), notes=list(r.notes), warnings=_warnings(r))
+
+
+def _warnings(r: GyrolessResult) -> list[ResultWarning]:
+    """filter_inconsistent when the consistency gates fail (processing.gyroless.estimation.filter_consistency)."""
+    g = r.consistency
+    if g.consistent:
+        return []
+    return [ResultWarning(
+        "filter_inconsistent",
+        "the magnetometer/sun-sensor innovations disagree with the filter's covariance ("
+        + "; ".join(g.reasons) + "): the attitude sigma does not cover the error. Calibrate the magnetometer "
+        "(magnetometer_calibration), estimate its bias (estimate_magnetometer_bias) or model the field error "
+        "(field_error_sigma_nT, field_error_tau_s)",
+        _consistency(r))]
+
+
+def _consistency(r: GyrolessResult) -> dict[str, Any]:
+    g = r.consistency
+    return _clean({
+        "tested_from_s": g.start_s, "nis_mean": g.nis.mean, "nis_dof": g.nis.mean_dof,
+        "nis_bounds_99": list(g.nis_bounds_99), "nis_ok": g.nis_ok, "window_s": g.window_s,
+        "n_windows": g.n_windows, "windows_failed": g.windows_failed, "windows_ok": g.windows_ok,
+        "ljung_box_p": g.ljung.p_min_adjusted, "ljung_box_max_lag": g.ljung.max_lag, "max_abs_rho": g.max_abs_rho,
+        "whiteness_ok": g.whiteness_ok, "consistent": g.consistent,
+    })
 
 
 def _tables(r: GyrolessResult) -> dict[str, dict[str, np.ndarray]]:
@@ -267,12 +293,12 @@ def _fig_consistency(result: TaskResult) -> Figure:
     ok = np.isfinite(nis)
     ax1.plot(ts[ok], nis[ok], ".", ms=1.5, color="0.5", label="NIS")
     if np.any(ok):
-        from scipy.stats import chi2
+        from processing.estimation.chi2 import chi2_ppf
 
         win = max(1, int(round(300 / max(result.summary.get("step_s") or 1.0, 1e-9))))
         kern = np.ones(win) / win
         ax1.plot(ts[ok], np.convolve(nis[ok], kern, mode="same"), color="tab:blue", label=f"mean over {win} steps")
-        ax1.plot(ts[ok], chi2.ppf(0.975, dof[ok]), color="tab:red", lw=0.8, label="95 % per step")
+        ax1.plot(ts[ok], chi2_ppf(0.975, dof[ok]), color="tab:red", lw=0.8, label="95 % per step")
         ax1.plot(ts[ok], dof[ok], color="k", lw=0.8, label="dof")
     ax1.set_ylabel("NIS")
     ax1.set_xlabel("time since start [s]")
