@@ -47,8 +47,8 @@ from processing.estimation.consistency import (
 from processing.frames.earth_orientation import EarthOrientation
 from processing.frames.earth_rotation_interp import itrs_to_gcrs_state_interp
 from processing.frames.orbital import dcm_IO_lvlh_004
-from processing.gyroless.ekf import FilterTuning
-from processing.gyroless.filtering import FilterRun, GyrolessInputs, run_filter, triad_q_OB
+from processing.gyroless.ekf import FilterTuning, ModelErrorStates
+from processing.gyroless.filtering import FilterRun, GyrolessInputs, model_error_series, run_filter, triad_q_OB
 from processing.gyroless.rts_smoother import SmoothedRun, rts_smooth
 from processing.units import MU_EARTH_M3_S2, NS_PER_S, RAD_PER_DEG
 
@@ -58,6 +58,8 @@ __all__ = [
     "GyrolessResult",
     "GyrolessSettings",
     "PreparedInputs",
+    "TUNING_DEFAULT",
+    "TUNING_WITH_MODEL_ERRORS",
     "estimate_gyroless_attitude",
     "filter_consistency",
     "hermite_state",
@@ -70,6 +72,16 @@ class GyrolessError(ValueError):
     """Inputs that do not allow the estimation (too few samples, no overlap, bad mounting, ...)."""
 
 
+TUNING_DEFAULT = FilterTuning()
+"""Process noise without model-error states (the magnetometer pins the attitude; NIS/NEES at their
+expected values on the 004 scenario, tests/processing/gyroless)."""
+TUNING_WITH_MODEL_ERRORS = FilterTuning(torque_noise_psd_N2_m2_s=(1e-5) ** 2)
+"""Process noise with magnetometer-bias or field-error states: the field then determines the attitude less
+(about the orbit normal, where a dawn-dusk Sun adds nothing), the rates and pitch lean on the dynamics, and
+the default unmodelled torque (4e-6 N m sqrt(s)) makes the filter overconfident there (3-sigma coverage of
+the filtered error 0.73-0.78 on clean 004 orbits); 1e-5 N m sqrt(s) gives >= 0.99 (bench/gyroless_ekf.py)."""
+
+
 @dataclass(frozen=True)
 class GyrolessSettings:
     """Settings of the estimation; noise as 1-sigma per axis.
@@ -78,8 +90,12 @@ class GyrolessSettings:
     field_model_error_nT (added in quadrature; IGRF vs the real field, ~50-200 nT in LEO),
     sun_sensor_noise_deg. initial_angles_deg: (roll, pitch, yaw) instead of the two-vector start.
     initial_attitude_sigma_deg, initial_rate_sigma_rad_s, initial_disturbance_sigma_N_m: initial 1-sigma.
-    tuning: process noise. converged_sigma_deg, nis_window_s: convergence criterion (see
+    tuning: process noise; None: :data:`TUNING_DEFAULT`, or :data:`TUNING_WITH_MODEL_ERRORS` when model-error
+    states are estimated (see there). converged_sigma_deg, nis_window_s: convergence criterion (see
     :func:`estimate_gyroless_attitude`). eop: Earth orientation used for ITRF -> GCRS.
+    estimate_magnetometer_bias, magnetometer_bias_sigma_nT: carry the magnetometer bias (in B) as 3 states
+    with this prior 1-sigma; field_error_sigma_nT (> 0 turns it on), field_error_tau_s: the reference
+    field's error in O as a first-order Gauss-Markov process (processing.gyroless.ekf.ModelErrorStates).
     """
 
     filter: Literal["ekf", "mekf"] = "mekf"
@@ -91,10 +107,26 @@ class GyrolessSettings:
     initial_attitude_sigma_deg: float = 10.0
     initial_rate_sigma_rad_s: float = 2e-3
     initial_disturbance_sigma_N_m: float = 1e-5
-    tuning: FilterTuning = field(default_factory=FilterTuning)
+    tuning: FilterTuning | None = None
     converged_sigma_deg: float = 2.0
     nis_window_s: float = 600.0
     eop: EarthOrientation = field(default_factory=EarthOrientation)
+    estimate_magnetometer_bias: bool = False
+    magnetometer_bias_sigma_nT: float = 1000.0
+    field_error_sigma_nT: float = 0.0
+    field_error_tau_s: float = 1800.0
+
+    def resolved_tuning(self) -> FilterTuning:
+        """The process noise used: ``tuning``, else the default for the model-error states chosen."""
+        if self.tuning is not None:
+            return self.tuning
+        return TUNING_WITH_MODEL_ERRORS if self.model_errors().n_states else TUNING_DEFAULT
+
+    def model_errors(self) -> ModelErrorStates:
+        return ModelErrorStates(magnetometer_bias=self.estimate_magnetometer_bias,
+                                bias_sigma_nT=self.magnetometer_bias_sigma_nT,
+                                field_error_sigma_nT=self.field_error_sigma_nT,
+                                field_error_tau_s=self.field_error_tau_s)
 
 
 @dataclass(frozen=True)
@@ -108,8 +140,9 @@ class GyrolessResult:
     sun_used (K,) bool; sun_in_shadow (K,) bool (a sun sample fell in the shadow and was ignored);
     nis (K,), nis_dof (K,) of the forward pass; nis_stats, whiteness_stats; time_to_converge_s (from
     the first step) or None; consistency: the gates (:func:`filter_consistency`) over the steps after
-    convergence; converged: a convergence time was found AND the gates pass; counts: dict of sample counts;
-    notes.
+    convergence; converged: a convergence time was found AND the gates pass; model_errors: the
+    model-error states (smoothed when the smoother ran) {"magnetometer_bias_B_nT", "field_error_O_nT":
+    (values (K, 3), 1-sigma (K, 3))} as far as estimated; counts: dict of sample counts; notes.
     """
 
     time_tai_ns: NDArray
@@ -134,6 +167,7 @@ class GyrolessResult:
     time_to_converge_s: float | None
     converged: bool
     consistency: FilterConsistency
+    model_errors: dict[str, tuple[NDArray, NDArray]]
     counts: dict[str, int]
     notes: list[str]
     settings: GyrolessSettings
@@ -340,6 +374,8 @@ def prepare_gyroless_inputs(
         t_s=(t[sl] - t[k0]) / NS_PER_S, b_O=b_O_unit[sl], b_B=meas.b_B[sl], sigma_b_rad=meas.sigma_b_rad[sl],
         s_O=orbit.s_O[sl], s_B=meas.s_B[sl], sigma_s_rad=meas.sigma_s_rad[sl], torque_B_N_m=torque.torque_B_N_m[sl],
         w0_rad_s=orbit.w0_rad_s[sl], n2_rad2_s2=orbit.n2_rad2_s2[sl],
+        b_O_norm_nT=np.linalg.norm(orbit.B_O[sl], axis=1),
+        dipole_B_A_m2=None if torque.dipole_B_A_m2 is None else torque.dipole_B_A_m2[sl],
     )
     return PreparedInputs(time_tai_ns=t[sl], inputs=inputs, q0_OB=q0, omega0_BI_B=-orbit.w0_rad_s[k0] * c2,
                           dcm_IO=orbit.dcm_IO[sl], w0_rad_s=orbit.w0_rad_s[sl], sun_in_shadow=meas.in_shadow[sl], k0=k0,
@@ -468,6 +504,7 @@ class _Torque:
 
     torque_B_N_m: NDArray
     notes: tuple[str, ...]
+    dipole_B_A_m2: NDArray | None = None
 
 
 def _control_torque(t: NDArray, B_B_nT: NDArray, torquer_time_tai_ns: ArrayLike | None,
@@ -481,8 +518,10 @@ def _control_torque(t: NDArray, B_B_nT: NDArray, torquer_time_tai_ns: ArrayLike 
     mu = np.asarray(torquer_mu_B_A_m2, dtype=float).reshape(-1, 3)
     i = np.searchsorted(t_tq, t, side="right") - 1
     has = i >= 0
-    torque[has] = np.cross(mu[i[has]], B_B_nT[has] * 1e-9)
-    return _Torque(torque, ())
+    dipole = np.zeros((t.size, 3))
+    dipole[has] = mu[i[has]]
+    torque[has] = np.cross(dipole[has], B_B_nT[has] * 1e-9)
+    return _Torque(torque, (), dipole)
 
 
 def estimate_gyroless_attitude(
@@ -522,13 +561,15 @@ def estimate_gyroless_attitude(
         run = run_filter(s.filter, inputs, J, q0, prep.omega0_BI_B,
                          attitude_sigma_rad=s.initial_attitude_sigma_deg * RAD_PER_DEG,
                          rate_sigma_rad_s=s.initial_rate_sigma_rad_s,
-                         disturbance_sigma_N_m=s.initial_disturbance_sigma_N_m, tuning=s.tuning)
+                         disturbance_sigma_N_m=s.initial_disturbance_sigma_N_m, tuning=s.resolved_tuning(),
+                         model_errors=s.model_errors())
     except ValueError as exc:
         raise GyrolessError(str(exc)) from exc
     sm = rts_smooth(run) if s.smoother else None
     x = sm.x if sm is not None else run.x_filt
     att_sig = sm.attitude_sigma_rad if sm is not None else run.attitude_sigma_rad
     rate_sig = sm.rate_sigma_rad_s if sm is not None else run.rate_sigma_rad_s
+    me = model_error_series(x, s.filter, sm.P if sm is not None else run.P_filt, s.model_errors())
     q_OB = rotations.quat_canonical(x[:, 3:7])
     w_BI = x[:, 0:3]
     c2_all = rotations.quat_rotate(rotations.quat_conjugate(q_OB), np.array([0.0, 1.0, 0.0]))
@@ -554,5 +595,6 @@ def estimate_gyroless_attitude(
         omega_BI_B=w_BI, omega_BO_B=w_BO, rate_sigma_rad_s=rate_sig, tau_d_O_N_m=x[:, 7:9], q_IB=q_IB,
         filtered=run, smoothed=sm, sun_used=run.used_sun, sun_in_shadow=in_shadow, nis=run.nis,
         nis_dof=run.nis_dof, nis_stats=nis_st, whiteness_stats=white, time_to_converge_s=t_conv,
-        converged=t_conv is not None and gate.consistent, consistency=gate, counts=counts, notes=notes, settings=s,
+        converged=t_conv is not None and gate.consistent, consistency=gate, model_errors=me,
+        counts=counts, notes=notes, settings=s,
     )
