@@ -132,7 +132,8 @@ def _summary(r: GyrolessResult, params: Params) -> dict[str, Any]:
         "sun_used_fraction": float(np.mean(r.sun_used)),
         "sun_outages": _intervals(t, outage),
         "counts": r.counts,
-        "artifacts": {"attitude": "attitude series (q_OB, roll/pitch/yaw, 1-sigma, rates, disturbance)",
+        "artifacts": {"attitude": "attitude series (q_OB, roll/pitch/yaw, 1-sigma, rates, disturbance; with the "
+                                  "model-error states mag_bias_{x,y,z}_nT in B and field_error_{x,y,z}_nT in O)",
                       "innovations": "per-step NIS and residual angles"},
     })
 
@@ -254,7 +255,7 @@ def _tables(r: GyrolessResult) -> dict[str, dict[str, np.ndarray]]:
         "sun_used": r.sun_used.astype(bool),
     }
     for name, (v, sig) in r.model_errors.items():
-        base = name.replace("_nT", "").replace("magnetometer_bias", "mag_bias").lower()
+        base = {"magnetometer_bias_B_nT": "mag_bias", "field_error_O_nT": "field_error"}[name]
         for i, a in enumerate("xyz"):
             att[f"{base}_{a}_nT"] = v[:, i]
             att[f"{base}_{a}_sigma_nT"] = sig[:, i]
