@@ -301,7 +301,8 @@ class FilterBase:
         return Phi
 
     def _field_prediction(self, cols: tuple, ref: Vector, norm_nT: float
-                          ) -> tuple[tuple[float, float, float], tuple[float, float, float], tuple[float, ...], float]:
+                          ) -> tuple[tuple[float, float, float], tuple[float, float, float],
+                                     tuple[float, float, float], float]:
         """With model-error states: v_O = |B_O| ref + g_O [nT], u = dcm_BO v_O, the predicted unit vector p of
         u + beta_B and its norm m [nT]."""
         me, a = self.model_errors, self.aug

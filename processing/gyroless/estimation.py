@@ -17,8 +17,9 @@ Pipeline (pure, arrays in, dataclass out):
 5. Known torque per step: magnetorquer dipole (zero-order hold of the last command) x measured field.
 6. Initialisation at the first step with both vectors: two-vector (TRIAD) solution, or given angles;
    w_BO = 0. Steps before it are dropped.
-7. Filter (004's EKF or the MEKF), optional RTS smoother (processing.gyroless.rts_smoother); consistency
-   statistics (processing.estimation.consistency).
+7. Filter (004's EKF or the MEKF; optionally with the magnetometer bias and a Gauss-Markov field error as
+   states, processing.gyroless.ekf.ModelErrorStates), optional RTS smoother (processing.gyroless.rts_smoother);
+   consistency statistics (processing.estimation.consistency) and gates (:func:`filter_consistency`).
 """
 
 from __future__ import annotations
@@ -547,7 +548,8 @@ def estimate_gyroless_attitude(
     torquer mu (T, 3) A m^2 in B (optional; without it the control torque is unmodelled);
     q_BM, q_BS mountings (default identity). Times int64 tai_ns, increasing.
     Convergence: first time from which the mean NIS over ``nis_window_s`` is inside its 99 % interval
-    and the largest 1-sigma attitude bound is below ``converged_sigma_deg``.
+    and the largest 1-sigma attitude bound is below ``converged_sigma_deg``; ``converged`` also needs the
+    consistency gates over the steps after it (:func:`filter_consistency`) to pass.
     """
     s = settings
     prep = prepare_gyroless_inputs(
