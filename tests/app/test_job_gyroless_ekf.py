@@ -118,6 +118,7 @@ def test_a_missing_mounting_is_an_error_naming_the_sensor(scenario, sensor, name
 def test_clean_data_raise_no_warning(result) -> None:  # noqa: ANN001
     assert result.warnings == [] and result.summary["consistency"]["consistent"] is True
     assert result.summary["magnetometer_bias"] is None and result.summary["field_error_O_nT"] is None
+    assert result.summary["process_noise"]["torque_noise_N_m"] == pytest.approx(4e-6)
 
 
 def _biased(scenario, bias_nT):  # noqa: ANN001, ANN202
@@ -155,5 +156,6 @@ def test_bias_states_in_the_summary_and_tables(scenario) -> None:  # noqa: ANN00
         if obs:
             assert abs(v - truth) < 4 * sig
     assert ("not_observable" in {w.code for w in r.warnings}) == (not all(b["observable"]))
+    assert r.summary["process_noise"]["torque_noise_N_m"] == pytest.approx(1e-5)  # the default with the states
     assert "mag_bias_x_nT" in r.tables["attitude"] and "mag_bias_z_sigma_nT" in r.tables["attitude"]
     json.dumps(r.summary, allow_nan=False)

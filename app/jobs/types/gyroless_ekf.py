@@ -115,6 +115,8 @@ def _summary(r: GyrolessResult, params: Params) -> dict[str, Any]:
                       "fraction_outside": wh.fraction_outside, "max_abs_rho": wh.max_abs_rho,
                       "rho": wh.rho},
         "consistency": _consistency(r),
+        "process_noise": {"torque_noise_N_m": math.sqrt(r.settings.resolved_tuning().torque_noise_psd_N2_m2_s),
+                          "disturbance_walk_N_m": math.sqrt(r.settings.resolved_tuning().disturbance_walk_psd_N2_m2_s)},
         "magnetometer_bias": _bias(r),
         "field_error_O_nT": _field_error(r),
         "innovation_rms_deg": {"magnetometer": rms(res[:, 0]), "sun_sensor": rms(res[:, 1])},
