@@ -25,8 +25,7 @@ def _run(controller: str, **kw) -> dict:  # noqa: ANN003
 
 @pytest.fixture(scope="module")
 def loops() -> dict:
-    return {"lqr": _run("lqr"), "energy": _run("energy"), "lqr_outage": _run("lqr", sun_outage_s=2000.0),
-            "energy_outage": _run("energy", sun_outage_s=2000.0)}
+    return {"lqr": _run("lqr"), "energy": _run("energy"), "lqr_outage": _run("lqr", sun_outage_s=2000.0)}
 
 
 def test_lqr_holds_yaw_under_1_deg_and_the_energy_law_does_not(loops: dict) -> None:
@@ -43,8 +42,9 @@ def test_lqr_roll_and_pitch_are_not_within_2_deg_under_the_004_disturbance(loops
     assert max(peak[0], peak[1]) > 3.0 and rms[0] > 1.5  # ... but not "better than 2 deg"
 
 
-def test_long_sun_outages_degrade_the_lqr_not_the_energy_law(loops: dict) -> None:
-    """004 figs. 5-6: 35 % outages degrade the LQR especially; here the LQR's yaw rms doubles."""
+def test_long_sun_outages_degrade_the_lqr(loops: dict) -> None:
+    """004 figs. 5-6: 35 % outages degrade the LQR especially; here its yaw rms grows by half or more (the
+    energy law's figures stay within a few per cent: bench/gyroless_closed_loop.py)."""
     assert loops["lqr_outage"]["rms"][2] > 1.3 * loops["lqr"]["rms"][2]
     assert np.all(loops["lqr_outage"]["est_rms"] > loops["lqr"]["est_rms"])  # the estimate degrades
-    np.testing.assert_allclose(loops["energy_outage"]["rms"], loops["energy"]["rms"], rtol=0.1)
+    assert np.all(loops["lqr_outage"]["rms"][:2] < 1.2 * loops["lqr"]["rms"][:2])  # roll/pitch: the disturbance
