@@ -14,7 +14,7 @@ Run: ``.venv/bin/python bench/star_tracker_robust.py [--seeds N] [--gyro-seeds K
 - gyro_line: the default scenario (0.4 Hz real vibration) plus a 10"/s, 0.25 Hz line in the gyro only,
   with gyro data (K seeds): how often the line is kept out and flagged, the real one removed, sigma errors;
 - timing: H hours of seed-003 data with gyro (10 Hz) through the analysis (main without these checks: 3.5 s CPU
-  for 24 h, ~11 s wall on a quiet machine), and H hours of 1 Hz quaternions clean and with 1 % outliers.
+  for 24 h), and H hours of 1 Hz quaternions clean and with 1 % outliers.
 
 OpenBLAS is pinned to one thread unless OPENBLAS_NUM_THREADS is set (its pool makes small QRs slow on a
 shared 2-core machine; see bench/star_tracker_accuracy.py).
