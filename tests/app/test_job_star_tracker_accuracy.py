@@ -210,3 +210,32 @@ def test_scalar_last_upload_is_named_by_the_plausibility_check():
     result = JOB.run(inputs(sc, streams={**sc.streams, "star_tracker": st}), JOB.params(), no_progress)
     assert result.summary["plausibility"]["st1"]["convention"] == "scalar_last"
     assert "quaternion_convention" in [w.code for w in result.warnings]
+
+
+def test_multi_head_mode_on_two_heads():
+    from processing.simulate.definitive import default_heads, simulate_definitive
+
+    sc = simulate_definitive(start_tai_ns=1_700_000_000 * 10**9, duration_s=1800.0, seed=3, heads=default_heads(2),
+                             motion="earth")
+    t = sc.streams["star_tracker"]["time_tai_ns"]
+    inputs = TaskInputs(streams=sc.streams, spacecraft=Spacecraft.from_json(sc.config), start_tai_ns=int(t.min()),
+                        end_tai_ns=int(t.max()))
+    res = JOB.run(inputs, JOB.params(heads=["all"], identical_heads=True), no_progress)
+    assert_json_plain(res.summary)
+    mh = res.summary["multi_head"]
+    truth = np.array(sc.truth.heads["st1"].sigma_rad) * 206264.806
+    for h in ("st1", "st2"):
+        got = mh["heads"][h]
+        assert got["observable"] == [True] * 3
+        assert np.all(np.abs(np.array(got["sigma_arcsec"]) - truth) < 3 * np.array(got["sigma_sigma_arcsec"]))
+    err = np.linalg.norm(np.array(sc.truth.heads["st2"].mounting_error_rad)) * 206264.806
+    assert abs(np.linalg.norm(mh["pairs"][0]["relative_mounting_error_arcsec"]) - err) < 3.0
+    assert "inter_head" in res.tables and "inter_boresight_angle" in JOB.figures(res, JOB.params())
+    assert not {"not_observable", "implausible_input"} & {w.code for w in res.warnings}
+    alone = JOB.run(inputs, JOB.params(heads=["all"]), no_progress)  # two heads, no assumption: ranges, no values
+    assert alone.summary["multi_head"]["heads"]["st1"]["sigma_arcsec"] == [None] * 3
+    assert "not_observable" in {w.code for w in alone.warnings}
+    with pytest.raises(TaskError, match="at least two heads"):
+        JOB.run(inputs, JOB.params(heads=["st1"]), no_progress)
+    with pytest.raises(TaskError, match="no star_tracker samples"):
+        JOB.run(inputs, JOB.params(heads=["st1", "st9"]), no_progress)

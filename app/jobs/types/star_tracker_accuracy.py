@@ -16,6 +16,7 @@ import numpy as np
 from matplotlib.figure import Figure
 from pydantic import BaseModel, ConfigDict, Field
 
+from app.jobs import multi_head
 from app.jobs.plausibility import HeadSamples, check_heads
 from app.jobs.registry import JobType
 from app.reports.headline import Answer
@@ -24,6 +25,7 @@ from processing.star_tracker.accuracy import (
     StarTrackerAccuracyError,
     analyze_star_tracker_accuracy,
 )
+from processing.star_tracker.multi_head import MultiHeadSettings
 from processing.tasks import Progress, ResultWarning, TaskError, TaskInputs, TaskResult
 from processing.units import ARCSEC_PER_RAD, NS_PER_S
 
@@ -42,6 +44,15 @@ class Params(BaseModel):
     harmonics: Literal["auto"] | Annotated[int, Field(ge=0)] = Field(
         "auto", description="sine harmonics M of the 003 §1.3 smoother, or 'auto' (2 x the GCV choice)")
     use_gyro: bool = Field(True, description="use gyro rates (comparison, lines, removal of real motion)")
+    heads: list[str] = Field(default_factory=list, max_length=16, description=(
+        "multi-head mode: two or more star-tracker heads (or ['all'] for every head in the window) compared "
+        "through their relative attitude: per-head, per-axis noise without a motion model, inter-boresight angle"))
+    identical_heads: bool = Field(False, description=(
+        "multi-head mode: the heads have the same per-axis noise (two heads determine it only so; tested by "
+        "chi-square)"))
+    max_interpolation_s: float = Field(0.0, ge=0.0, le=60.0, description=(
+        "multi-head mode: a head is interpolated to the other's sample times across gaps up to this long "
+        "(0: simultaneous samples only)"))
 
 
 def _as_list(values: Any, scale: float = 1.0) -> list[float | None]:
@@ -271,7 +282,8 @@ def _tables(r: StarTrackerAccuracy) -> dict[str, dict[str, np.ndarray]]:
 
 def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
     progress(0.02, "loading")
-    sensor, q_BS = _pick_sensor(inputs, params.sensor)
+    heads = multi_head.head_names(inputs, params.heads) if params.heads else []
+    sensor, q_BS = _pick_sensor(inputs, params.sensor if params.sensor or not heads else heads[0])
     st = inputs.star_tracker(sensor)
     t, q = st.time_tai_ns, st.q_IS
     keep = np.concatenate([[True], np.diff(t) > 0])
@@ -304,9 +316,19 @@ def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
     warnings: list[ResultWarning] = []
     if gyro is not None:
         summary["plausibility"], warnings = _plausibility(sensor, t[keep], q[keep], q_BS, gyro, notes)
+    tables = _tables(result)
+    if heads:
+        progress(0.96, "multi-head comparison")
+        mh = multi_head.run_multi_head(inputs, heads, MultiHeadSettings(
+            identical_heads=params.identical_heads, max_interpolation_s=params.max_interpolation_s))
+        summary["multi_head"] = mh.summary
+        tables.update(mh.tables)
+        warnings += mh.warnings
+        notes.append(f"multi-head mode: heads {heads} compared through their relative attitude (summary.multi_head); "
+                     f"the single-head 003 analysis above is of {sensor}")
     return TaskResult(
         summary=summary,
-        tables=_tables(result),
+        tables=tables,
         notes=notes,
         warnings=warnings + _warnings(result, summary),
     )
@@ -457,6 +479,7 @@ def figures(result: TaskResult, params: Params) -> dict[str, Figure]:
         "rates": _fig_rates(result),
         "spectra": _fig_spectra(result),
         "residual_spectra": _fig_residual_spectrum(result),
+        **({"inter_boresight_angle": multi_head.figure(result.tables)} if "inter_head" in result.tables else {}),
     }
 
 
