@@ -40,6 +40,7 @@ from processing.attitude import rotations
 from processing.gyro_calibration.alignment import (
     AlignmentError,
     AlignmentEstimate,
+    RateNoise,
     WindowRates,
     alignment_windows,
     estimate_alignment,
@@ -54,6 +55,7 @@ from processing.gyro_calibration.drift_observer import (
     run_drift_observer,
     stationary_noise,
 )
+from processing.gyro_calibration.observability import RANK_TOLERANCE
 from processing.gyro_calibration.slews import SlewReport, slew_report
 from processing.signal.gyro_integration import (
     IntervalRotations,
@@ -99,7 +101,10 @@ class CalibrationSettings:
     drift in the alignment; min_spread, max_misalignment_sigma_rad: observability thresholds;
     convergence_tolerance_rad_s: tube for the drift convergence time; window_outlier_factor: windows
     whose polynomial residual exceeds this factor x the median are not used; lag_compensation: advance
-    the drift trends by the observer's ramp lag (processing.gyro_calibration.drift_observer.ramp_lag_s).
+    the drift trends by the observer's ramp lag (processing.gyro_calibration.drift_observer.ramp_lag_s);
+    per_axis_scale_factor: the alignment's linear step also estimates the scale factor per gyro axis;
+    rank_tolerance: relative eigenvalue threshold of the information matrix
+    (processing.gyro_calibration.observability).
     """
 
     t_r_s: float = 200.0
@@ -119,6 +124,8 @@ class CalibrationSettings:
     convergence_tolerance_rad_s: float = 0.01 * RAD_PER_ARCSEC
     window_outlier_factor: float = 1.5
     lag_compensation: bool = True
+    per_axis_scale_factor: bool = False
+    rank_tolerance: float = RANK_TOLERANCE
 
 
 @dataclass(frozen=True)
@@ -129,7 +136,11 @@ class GyroCalibration:
     drift_rad_s (3,): drift at the end of the data (trend of the last window), gyro frame;
     drift_model: whole-span trend; drift_noise_rad_s (3,): std of the corrected observer estimates
     about the model; drift_convergence_s: time from the first star-tracker sample after which every
-    corrected drift estimate stays within the tolerance of the model (NaN if never).
+    corrected drift estimate stays within the tolerance of the model (NaN if never);
+    drift_sigma_rad_s (3,): 1-sigma of drift_rad_s (the end-of-trend functional of the observer's
+    estimates: their correlated noise about the trend, with the correlation time drift_correlation_time_s
+    (3,) from their lag-1 autocorrelation, and the apparent drift that the misalignment and scale-factor
+    errors put into them); NaN where the alignment's information matrix does not determine the drift.
     observer: the last observer run; windows: the star-tracker window rates; rotations: the interval
     rotations of the last run; spline: the two-pass filtered raw gyro data (gyro frame);
     iterations: list of dicts (misalignment_rad, scale_factor_error, change in sigmas) per pass;
@@ -145,6 +156,8 @@ class GyroCalibration:
     drift_model: DriftTrend
     drift_noise_rad_s: FloatArray
     drift_convergence_s: float
+    drift_sigma_rad_s: FloatArray
+    drift_correlation_time_s: FloatArray
     observer: DriftObserverResult
     windows: WindowRates
     rotations: IntervalRotations
@@ -226,7 +239,9 @@ def calibrate_gyro(
     last = passes.last
     return GyroCalibration(
         alignment=last.est, drift_rad_s=drift.end_rad_s, drift_model=last.model, drift_noise_rad_s=drift.noise_rad_s,
-        drift_convergence_s=drift.convergence_s, observer=last.obs, windows=ctx.windows.rates, rotations=last.rot,
+        drift_convergence_s=drift.convergence_s, drift_sigma_rad_s=drift.sigma_rad_s,
+        drift_correlation_time_s=drift.correlation_time_s, observer=last.obs, windows=ctx.windows.rates,
+        rotations=last.rot,
         spline=spline, iterations=list(passes.history), converged=passes.converged, slews=slews,
         st_noise_rad=ctx.windows.st_noise_rad, integration_error_rad=float(np.max(last.rot.error_rad)),
         windows_used=ctx.windows.used, observer_rate_map=last.rate_map, observer_drift_ref_rad_s=last.b_ref,
@@ -251,6 +266,7 @@ class _Windows:
     inv_var: FloatArray
     w_G: FloatArray
     st_noise_rad: FloatArray
+    gain: FloatArray
 
 
 @dataclass(frozen=True)
@@ -299,6 +315,7 @@ def _context(
         rates=windows, used=used, t_s=t_win, w_A=windows.w_A_rad_s[sel], window=windows.window[sel],
         inv_var=1.0 / windows.rate_variance_s2[sel], w_G=spline.rate(t_win),
         st_noise_rad=np.sqrt(np.median(windows.residual_rms_rad[used] ** 2, axis=0)),
+        gain=np.asarray(windows.rate_noise_gain)[sel],
     )
     return _Context(t_st, q_st, q_nom, plan, win, t_o, lag, cfg)
 
@@ -313,7 +330,8 @@ def _align(
         return estimate_alignment(
             win.t_s, w_g, win.w_A, win.window, win.inv_var, q_GS_prior=q_prior, scale_factor_prior=m_prior,
             q_GS_nominal=ctx.q_nom, drift_degree=degree, min_spread=cfg.min_spread,
-            max_sigma_rad=cfg.max_misalignment_sigma_rad,
+            max_sigma_rad=cfg.max_misalignment_sigma_rad, noise=RateNoise(win.gain, win.st_noise_rad),
+            per_axis_scale_factor=cfg.per_axis_scale_factor, rank_tolerance=cfg.rank_tolerance,
         )
     except AlignmentError as exc:
         raise CalibrationError(str(exc)) from exc
@@ -363,11 +381,12 @@ def _pass(
     report(frac + 0.6 / cfg.max_iterations, f"pass {it}: alignment and scale factor (QUEST)")
     new = _align(ctx, new_model, q_GS, m, 0)
     d_theta = rotations.quat_to_rotvec(rotations.quat_multiply(rotations.quat_conjugate(q_GS), new.q_GS))
+    # the change of the determined parameters only (the others are held at the prior or not reported)
     sig_th = np.sqrt(np.diag(new.misalignment_cov_rad2))
-    change = max(
-        float(np.max(np.abs(d_theta) / np.maximum(sig_th, 1e-300))),
-        abs(new.scale_factor_error - m) / max(new.scale_factor_sigma, 1e-300),
-    )
+    changes = [0.0, *(np.abs(d_theta) / np.maximum(sig_th, 1e-300))[new.observable_axes].tolist()]
+    if np.all(new.scale_factor_observable):
+        changes.append(abs(new.scale_factor_error - m) / max(new.scale_factor_sigma, 1e-300))
+    change = float(max(changes))
     record: dict[str, object] = {
         "iteration": it, "misalignment_rad": new.misalignment_rad.tolist(),
         "scale_factor_error": new.scale_factor_error,
@@ -407,15 +426,18 @@ def _iterate(ctx: _Context, est: AlignmentEstimate, report: Callable[[float, str
 @dataclass(frozen=True)
 class _DriftSummary:
     """The drift at the end of the data [rad/s] (trend of the last window), the noise of the corrected
-    estimates about the whole-span model, and the convergence time [s] (NaN if never)."""
+    estimates about the whole-span model, the convergence time [s] (NaN if never), the sigma of the end
+    drift [rad/s] and the correlation time of the estimates [s] (per axis)."""
 
     end_rad_s: FloatArray
     noise_rad_s: FloatArray
     convergence_s: float
+    sigma_rad_s: FloatArray
+    correlation_time_s: FloatArray
 
 
 def _drift_summary(ctx: _Context, passes: _Passes) -> _DriftSummary:
-    """The reported drift, its noise and convergence time from the last observer run."""
+    """The reported drift, its noise, sigma and convergence time from the last observer run."""
     cfg, t_st, p = ctx.cfg, ctx.t_st, passes.last
     obs, usable, model = p.obs, p.usable, p.model
     last = usable & (t_st >= t_st[-1] - cfg.trend_window_s)
@@ -425,7 +447,47 @@ def _drift_summary(ctx: _Context, passes: _Passes) -> _DriftSummary:
     noise = np.std(dev, axis=0) if dev.shape[0] > 1 else np.full(3, np.nan)
     corrected = obs.mode == MODE_CORRECTED
     conv = drift_convergence_time(t_st, obs.drift_rad_s, corrected, model(t_st), cfg.convergence_tolerance_rad_s)
-    return _DriftSummary(end_trend(t_st[-1]), noise, conv)
+    sigma, tau = _end_drift_sigma(ctx, p, last, end_trend)
+    return _DriftSummary(end_trend(t_st[-1]), noise, conv, sigma, tau)
+
+
+def _end_drift_sigma(ctx: _Context, p: _Pass, last: NDArray[np.bool_], trend: DriftTrend
+                     ) -> tuple[FloatArray, FloatArray]:
+    """Sigma (3,) of the end-of-data drift trend and the correlation time (3,) of the estimates.
+
+    The trend's end value is a linear functional L of the estimates b_k of the last window (LSQ polynomial
+    of the trend's degree). Two error terms: (i) the estimates' noise about the trend, correlated with
+    rho(dt) = exp(-|dt| / tau), tau from their lag-1 autocorrelation (the observer is a low-pass filter
+    of time constant ~T_r); (ii) the apparent drift of the calibration errors, (1 + m) R(q_GS)
+    (dm w_k - w_k x dtheta) at the samples' rates, through the same L, with the alignment's covariance.
+    NaN when the drift is not determined."""
+    est = p.est
+    t = ctx.t_st[last]
+    if t.size < 3 or not np.all(est.drift_observable):
+        return np.full(3, np.nan), np.full(3, np.nan)
+    x = (t - trend.t_ref_s) / trend.scale_s
+    x_end = (ctx.t_st[-1] + ctx.lag - trend.t_ref_s) / trend.scale_s
+    powers = np.arange(trend.degree + 1)
+    func = (x_end**powers) @ np.linalg.pinv(x[:, None] ** powers)  # (n,): end value = func @ b
+    dev = p.obs.drift_rad_s[last] - trend(t - ctx.lag)
+    s2 = np.mean(dev**2, axis=0)
+    rho1 = np.sum(dev[1:] * dev[:-1], axis=0) / np.maximum(np.sum(dev**2, axis=0), 1e-300)
+    t_o = ctx.t_o
+    tau = np.where(rho1 > 0, -t_o / np.log(np.clip(rho1, 1e-12, 1.0 - 1e-12)), 0.0)
+    dt = np.abs(t[:, None] - t[None, :])
+    var_noise = np.array([s2[a] * (func @ np.exp(-dt / max(tau[a], 1e-9 * t_o)) @ func) for a in range(3)])
+    # rates of the samples: mean of the gyro interval rotations on both sides (star-tracker axes)
+    rv = p.rot.rotvec_rad / np.diff(ctx.t_st)[:, None]
+    idx = np.flatnonzero(last)
+    w = 0.5 * (rv[np.clip(idx - 1, 0, rv.shape[0] - 1)] + rv[np.clip(idx, 0, rv.shape[0] - 1)])
+    n_m = est.covariance.shape[0] - 3 - 3 * (est.drift_offset.degree + 1)
+    m_cols = w[:, :, None] if n_m == 1 else np.zeros((w.shape[0], 3, n_m))
+    jac = np.concatenate([m_cols, -rotations.skew(w)], axis=2)  # (n, 3, n_m + 3)
+    gain = np.einsum("n,nkp->kp", func, jac)
+    dcm = (1.0 + est.scale_factor_error) * rotations.quat_to_dcm(est.q_GS)
+    cov_c = np.nan_to_num(est.covariance[: n_m + 3, : n_m + 3])
+    var_cal = np.diag(dcm @ gain @ cov_c @ gain.T @ dcm.T)
+    return np.sqrt(var_noise + var_cal), tau
 
 
 def _slew_report(ctx: _Context, passes: _Passes, drift_noise_rad_s: FloatArray) -> SlewReport:
