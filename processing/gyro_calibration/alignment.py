@@ -70,7 +70,8 @@ from processing.gyro_calibration.observability import (
     analyse_information,
     noise_meat,
     parameter_jacobian,
-    restricted_covariance,
+    subspace_covariance,
+    truncated_inverse,
 )
 
 __all__ = [
@@ -232,8 +233,9 @@ class AlignmentEstimate:
 
     q_GS (4,): estimated S^Delta = R(q_GS) (canonical); misalignment_rad (3,): rotation vector of
     q_GS_nominal^-1 o q_GS in star-tracker axes (= rotvec(q_GS) when the nominal is the identity);
-    scale_factor_error: m^; misalignment_cov_rad2 (3, 3), scale_factor_sigma: covariance of the
-    determinable parameters (processing.gyro_calibration.observability; NaN rows for the undeterminable);
+    scale_factor_error: m^; misalignment_cov_rad2 (3, 3), scale_factor_sigma (NaN when undeterminable):
+    from the covariance on the determinable subspace (processing.gyro_calibration.observability; zero
+    along the null directions, so only the determinable components' entries are sigmas);
     drift_offset: the residual drift polynomial removed (gyro frame, a DriftTrend);
     drift_offset_sigma_rad_s (3,): sigma of its constant term (gyro axes);
     spread_eigenvalues (3,) ascending and spread_axes (3, 3) columns: the rate-direction spread matrix;
@@ -241,9 +243,10 @@ class AlignmentEstimate:
     limit); scale_factor_observable, drift_observable (3,): determinable by the information matrix;
     observability: the analysis itself; solver_disagreement_rad: largest angle between QUEST, q-method
     and SVD; n_windows, n_samples; residual_rad_s (n, 3): w^g_S - w^a after the estimate (star-tracker
-    axes); linearised (p,): the parameters of the linear step (observability.names; 0 for the
-    undeterminable); covariance (p, p) of the linear step; jackknife_cov (p, p): the delete-one-window
-    jackknife of the same (a cross-check: zero along undetermined directions, so never the sigma);
+    axes); linearised (p,): the parameters of the linear step (observability.names; the minimum-norm
+    subspace solution); covariance (p, p) of the linear step on the determinable subspace; jackknife_cov
+    (p, p): the delete-one-window jackknife of the same (a cross-check that inflates the covariance when
+    significantly larger; zero along undetermined directions, so never the sigma by itself);
     residual_variance_factor: observed over expected weighted squared rate residuals (the covariance is
     scaled by it when above 1); scale_factor_per_axis (3,) and its sigma: m per gyro axis from the
     linear step when estimated (per_axis_scale_factor), else NaN.
@@ -349,9 +352,9 @@ def estimate_alignment(
         # the weighted mean of the per-axis factors is what the magnitude ratio estimates
         sf_sigma = float(np.sqrt(_per_axis_mean_variance(lin.cov[:3, :3], smp, q_prior))) if np.all(sf_det) else np.nan
         per_axis = np.where(sf_det, m0 + lin.x[:3], np.nan)
-        per_axis_sigma = np.sqrt(var_m)
+        per_axis_sigma = np.where(sf_det, np.sqrt(var_m), np.nan)
     else:
-        sf_sigma = float(np.sqrt(var_m[0]))
+        sf_sigma = float(np.sqrt(var_m[0])) if sf_det[0] else np.nan
         per_axis = per_axis_sigma = np.full(3, np.nan)
     return AlignmentEstimate(
         q_GS=obs.q_GS, misalignment_rad=obs.theta, scale_factor_error=m_est,
@@ -447,26 +450,22 @@ def _linear_step(smp: _Samples, q_prior: FloatArray, m0: float, drift_degree: in
     x_t = (t - t_ref) / scale
     r = rotations.quat_rotate(q_SG, g) / (1.0 + m0) - a_vec
     jac, names = parameter_jacobian(a_vec, x_t, q_prior, drift_degree=drift_degree, per_axis_scale_factor=per_axis)
-    p = jac.shape[2]
     n_tot = np.einsum("n,nki,nkj->ij", smp.sw, jac, jac)
     v_tot = np.einsum("n,nki,nk->i", smp.sw, jac, r)
     info = analyse_information(n_tot, names, rank_tolerance=rank_tolerance)
     det = info.determinable
-    x = np.zeros(p)
-    if np.any(det):
-        x[det] = np.linalg.solve(n_tot[np.ix_(det, det)], v_tot[det])
+    n_plus = truncated_inverse(n_tot, rank_tolerance)
+    x = n_plus @ v_tot
     post = r - np.einsum("nkp,p->nk", jac, x)
     n_det = int(np.sum(det))
-    jk = _jackknife(jac, r, smp, det, n_tot, v_tot, n_win)
+    jk = _jackknife(jac, r, smp, n_tot, v_tot, n_win, rank_tolerance)
     if smp.noise is not None:
         meat = noise_meat(jac, smp.sw, smp.noise.gain, smp.wid, smp.noise.sigma_rad)
         expected = float(np.sum(smp.sw[:, None] * np.sum(smp.noise.gain**2, axis=1)[:, None] * smp.noise.sigma_rad**2))
-        if n_det:
-            ix = np.ix_(det, det)
-            expected -= float(np.trace(np.linalg.solve(n_tot[ix], meat[ix])))
+        expected -= float(np.trace(n_plus @ meat))
         observed = float(np.sum(smp.sw[:, None] * post**2))
         factor = observed / expected if expected > 0 else float("nan")
-        model = restricted_covariance(n_tot, meat, det, 1.0)
+        model = subspace_covariance(n_tot, meat, rank_tolerance)
         # cross-check: the jackknife over W windows (~W - 1 degrees of freedom) far above the model means
         # an error the white-noise model does not have (e.g. correlated star-tracker noise): inflate by it
         ratio = float(np.nanmax(np.diag(jk)[det] / np.diag(model)[det])) if n_det else 1.0
@@ -490,25 +489,17 @@ def _linear_step(smp: _Samples, q_prior: FloatArray, m0: float, drift_degree: in
     return _Linear(x, info, cov, jk, factor, offset, offset_sigma, g - offset(t))
 
 
-def _jackknife(jac: FloatArray, r: FloatArray, smp: _Samples, det: NDArray[np.bool_], n_tot: FloatArray,
-               v_tot: FloatArray, n_win: int) -> FloatArray:
-    """Delete-one-window jackknife covariance (p, p) of the determinable parameters (NaN elsewhere)."""
-    p = n_tot.shape[0]
-    out = np.full((p, p), np.nan)
-    if not np.any(det):
-        return out
-    jd = jac[:, :, det]
-    nn = np.einsum("n,nki,nkj->nij", smp.sw, jd, jd)
-    vv = np.einsum("n,nki,nk->ni", smp.sw, jd, r)
+def _jackknife(jac: FloatArray, r: FloatArray, smp: _Samples, n_tot: FloatArray, v_tot: FloatArray, n_win: int,
+               rank_tolerance: float) -> FloatArray:
+    """Delete-one-window jackknife covariance (p, p) of the subspace estimate (zero along null directions)."""
+    nn = np.einsum("n,nki,nkj->nij", smp.sw, jac, jac)
+    vv = np.einsum("n,nki,nk->ni", smp.sw, jac, r)
     order = np.argsort(smp.wid, kind="stable")
     first = np.flatnonzero(np.diff(smp.wid[order], prepend=-1))  # window ids are 0..W-1, all present
     big_n, big_v = np.add.reduceat(nn[order], first, axis=0), np.add.reduceat(vv[order], first, axis=0)
-    ix = np.ix_(det, det)
-    loo = (np.linalg.pinv(n_tot[ix][None] - big_n, rcond=1e-12, hermitian=True)
-           @ (v_tot[det][None] - big_v)[..., None])[..., 0]
+    loo = (truncated_inverse(n_tot[None] - big_n, rank_tolerance) @ (v_tot[None] - big_v)[..., None])[..., 0]
     dev = loo - loo.mean(axis=0)
-    out[ix] = (n_win - 1) / n_win * dev.T @ dev
-    return out
+    return (n_win - 1) / n_win * dev.T @ dev
 
 
 @dataclass(frozen=True)
@@ -561,10 +552,7 @@ def _observability(
     spread = (rot.total * np.eye(3) - np.einsum("n,ni,nj->ij", rot.weight, a_unit, a_unit)) / rot.total
     lam, axes = np.linalg.eigh(spread)
     info = lin.observability
-    null = info.eigenvectors[n_m : n_m + 3, info.eigenvalues < info.rank_tolerance]  # theta part of the null space
-    u_null, s_null, _ = np.linalg.svd(null, full_matrices=False) if null.size else (np.zeros((3, 0)), np.zeros(0),
-                                                                                     None)
-    pinned_dirs = np.concatenate([axes[:, lam < min_spread], u_null[:, s_null > info.null_threshold]], axis=1)
+    pinned_dirs = np.concatenate([axes[:, lam < min_spread], info.null_directions(slice(n_m, n_m + 3))], axis=1)
     q_est = rot.q_GS
     theta = rotations.quat_to_rotvec(rotations.quat_multiply(rotations.quat_conjugate(q_nom), q_est))
     pinned = np.zeros((3, 0))

@@ -29,11 +29,13 @@ Determinability (documented in the README, section of alignment_calibration):
 4. the determinable parameters' block of N is checked again (step 2); while it is singular, the one
    with the largest variance inflation (C^-1)_jj is moved to the undeterminable set.
 
-The covariance of the determinable parameters is that of the estimator with the undeterminable ones
-held at the prior: N_DD^-1 M_DD N_DD^-1, M = J^T W Cov(e) W J built from the white star-tracker noise
-through the window polynomials (the T_p samples of a window are one polynomial, so they are strongly
-correlated: :func:`noise_meat`), scaled by the residual variance factor (observed weighted squared
-residuals over their expectation, never below 1).
+The estimate and its covariance live on the determinable subspace (the eigen-directions kept in step
+2): x = N+ J^T W r and Cov = N+ M N+ with N+ the inverse of N on that subspace (:func:`truncated_inverse`;
+for a parameter outside the null directions it does not depend on what they hold), M = J^T W Cov(e) W J
+built from the white star-tracker noise through the window polynomials (the T_p samples of a window are
+one polynomial, so they are strongly correlated: :func:`noise_meat`), scaled by the residual variance
+factor (observed weighted squared residuals over their expectation, never below 1) and by the
+jackknife's variance ratio when that is significantly above 1 (alignment module).
 
 Arrays (n, 3) in star-tracker axes, rates rad/s, angles rad; pure numerics.
 """
@@ -53,7 +55,8 @@ __all__ = [
     "motion_summary",
     "noise_meat",
     "parameter_jacobian",
-    "restricted_covariance",
+    "subspace_covariance",
+    "truncated_inverse",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -105,7 +108,9 @@ class Observability:
     determinable (p,) bool; variance_inflation (p,): (C^-1)_jj on the determinable block (the factor
     by which correlations with the other determinable parameters inflate each variance; inf for the
     undeterminable); correlation (p, p) of the determinable block (NaN elsewhere); null_component (p,):
-    each parameter's component in the null directions; rank_tolerance, null_threshold used.
+    each parameter's component in the null directions; rank_tolerance, null_threshold used;
+    parameter_scale (p,): diag(N)^-1/2, so that ``parameter_scale[:, None] * eigenvectors`` are the
+    directions in parameter units (0 for a zero column).
     """
 
     names: tuple[str, ...]
@@ -118,6 +123,20 @@ class Observability:
     null_component: FloatArray
     rank_tolerance: float
     null_threshold: float
+    parameter_scale: FloatArray
+
+    def null_directions(self, rows: slice) -> FloatArray:
+        """Orthonormal basis (k, m) of the null directions' projection on the parameters ``rows`` (in their
+        units), keeping the projections longer than null_threshold (e.g. the misalignment rotations that
+        the data do not determine)."""
+        null = (self.parameter_scale[:, None] * self.eigenvectors)[:, self.eigenvalues < self.rank_tolerance][rows]
+        if null.size == 0:
+            return np.zeros((null.shape[0], 0))
+        norm = np.linalg.norm(null, axis=0)
+        null = null / np.where(norm > 0, norm, 1.0)
+        part = np.linalg.norm(self.eigenvectors[:, self.eigenvalues < self.rank_tolerance][rows], axis=0)
+        u, sv, _ = np.linalg.svd(null[:, part > self.null_threshold], full_matrices=False)
+        return u[:, sv > 1e-6]
 
     def flags(self, prefix: str) -> NDArray[np.bool_]:
         """Determinable flags of the parameters whose name starts with prefix (e.g. "misalignment_")."""
@@ -160,7 +179,8 @@ def analyse_information(normal: FloatArray, names: tuple[str, ...], *, rank_tole
         corr[np.ix_(det, det)] = cov / s[:, None] / s[None, :]
     return Observability(names=names, eigenvalues=rel, eigenvectors=vec, rank=int(np.sum(~null)), determinable=det,
                          variance_inflation=vif, correlation=corr, null_component=null_comp,
-                         rank_tolerance=rank_tolerance, null_threshold=null_threshold)
+                         rank_tolerance=rank_tolerance, null_threshold=null_threshold,
+                         parameter_scale=np.where(d > 0, 1.0 / np.where(d > 0, d, 1.0), 0.0))
 
 
 def noise_meat(jac: FloatArray, weight: FloatArray, gain: FloatArray, window: NDArray[np.intp],
@@ -181,21 +201,32 @@ def noise_meat(jac: FloatArray, weight: FloatArray, gain: FloatArray, window: ND
     return np.einsum("wkap,a,wkaq->pq", h, s2, h)
 
 
-def restricted_covariance(normal: FloatArray, meat: FloatArray | None, determinable: NDArray[np.bool_],
-                          scale: float = 1.0) -> FloatArray:
-    """Covariance (p, p) of the determinable parameters with the others held at the prior, NaN elsewhere.
+def truncated_inverse(normal: FloatArray, rank_tolerance: float = RANK_TOLERANCE) -> FloatArray:
+    """Inverse (..., p, p) of normal matrices (..., p, p) on their determinable subspace.
 
-    scale * N_DD^-1 M_DD N_DD^-1 (meat given), or scale * N_DD^-1 (the weights are inverse variances
-    of independent samples and scale is their residual variance factor)."""
-    p = normal.shape[0]
-    cov = np.full((p, p), np.nan)
-    if not np.any(determinable):
-        return cov
-    ix = np.ix_(determinable, determinable)
-    n_inv = np.linalg.inv(normal[ix])
-    block = n_inv if meat is None else n_inv @ meat[ix] @ n_inv
-    cov[ix] = scale * 0.5 * (block + block.T)
-    return cov
+    With C = D N D (unit diagonal) = V diag(lambda) V^T: D V_k diag(1 / lambda_k) V_k^T D over the
+    eigenvalues lambda_k >= rank_tolerance x the largest (module docstring, step 2). For a parameter (or
+    combination) outside the null directions this is its covariance per unit noise whatever the null
+    directions hold; along the null directions it is zero (they are not determined, not known)."""
+    nn = np.asarray(normal, dtype=np.float64)
+    diag = np.sqrt(np.maximum(np.einsum("...ii->...i", nn), 0.0))
+    d = np.where(diag > 0, 1.0 / np.where(diag > 0, diag, 1.0), 0.0)
+    c = nn * d[..., :, None] * d[..., None, :]
+    lam, vec = np.linalg.eigh(c)
+    keep = lam >= rank_tolerance * np.maximum(lam[..., -1:], 1e-300)
+    inv_lam = np.where(keep, 1.0 / np.where(keep, lam, 1.0), 0.0)
+    out = np.einsum("...ik,...k,...jk->...ij", vec, inv_lam, vec)
+    return out * d[..., :, None] * d[..., None, :]
+
+
+def subspace_covariance(normal: FloatArray, meat: FloatArray | None, rank_tolerance: float = RANK_TOLERANCE,
+                        scale: float = 1.0) -> FloatArray:
+    """Covariance (p, p) of the LSQ estimate on the determinable subspace (N+ = :func:`truncated_inverse`):
+    scale N+ M N+ (meat given), or scale N+ (the weights are inverse variances of independent samples
+    and scale is their residual variance factor)."""
+    n_plus = truncated_inverse(normal, rank_tolerance)
+    block = n_plus if meat is None else n_plus @ meat @ n_plus
+    return scale * 0.5 * (block + block.T)
 
 
 def motion_summary(w_A_rad_s: FloatArray, weight: FloatArray) -> dict[str, object]:
