@@ -88,8 +88,11 @@ FloatArray = NDArray[np.float64]
 
 POLY_DEGREE = 5
 """Degree of the star-tracker MRP polynomial in a window (000: 5)."""
-REGULARISATION = 1e-9
-"""Weight (relative to the total) of three pseudo vector pairs that pin unobservable rotations to the prior."""
+REGULARISATION = 1e-7
+"""Weight (relative to the total) of three pseudo vector pairs that pin unobservable rotations to the prior.
+It also separates the two largest eigenvalues of Wahba's K when all rates are about one axis (the rotation
+about it undetermined): with 1e-9 QUEST's eigenvector lost ~1e-5 rad along the determined directions on such
+arcs; its pull on the determined rotation is this weight times the offset from the prior (~1e-11 rad)."""
 
 
 class AlignmentError(ValueError):
@@ -558,7 +561,7 @@ def _observability(
     pinned = np.zeros((3, 0))
     if pinned_dirs.shape[1]:
         u, s, _ = np.linalg.svd(pinned_dirs, full_matrices=False)
-        pinned = u[:, s > 1e-6]
+        pinned = u[:, s > 0.3]  # unit vectors: a second direction only if it really differs from the first
         theta_prior = rotations.quat_to_rotvec(rotations.quat_multiply(rotations.quat_conjugate(q_nom), q_prior))
         theta = theta - pinned @ (pinned.T @ theta) + pinned @ (pinned.T @ theta_prior)
         q_est = rotations.quat_canonical(rotations.quat_multiply(q_nom, rotations.rotvec_to_quat(theta)))

@@ -352,6 +352,8 @@ class _Pass:
     usable: NDArray[np.bool_]
     change: float
     record: dict[str, object]
+    q_GS_in: FloatArray
+    m_in: float
 
 
 def _pass(
@@ -364,16 +366,8 @@ def _pass(
     b_ref = est.drift_offset(t_mid) + (model(t_mid) if model is not None else 0.0)
     frac = 0.1 + 0.8 * it / (cfg.max_iterations + 1)
     report(frac, f"pass {it}: integrating the calibrated gyro (eq. 7)")
-    dcm_SG = rotations.quat_to_dcm(rotations.quat_conjugate(q_GS))
-    rot = interval_rotations(ctx.plan, q_GX=q_GS, scale_factor_error=m, drift=b_ref)
-    on = correction_flags(rot.max_rate_rad_s, rot.valid, cfg.rate_threshold_rad_s)
     report(frac + 0.3 / cfg.max_iterations, f"pass {it}: drift observer")
-    rate_map = dcm_SG / (1.0 + m)
-    obs = run_drift_observer(
-        t_st, ctx.q_st, rot.q, rot.rotvec_rad, rot.valid, on, rate_map=rate_map, drift_ref_rad_s=b_ref,
-        t_r_s=cfg.t_r_s, xi=cfg.xi, acquisition=cfg.acquisition, trend_window_s=cfg.trend_window_s,
-        trend_degree=cfg.trend_degree,
-    )
+    rot, rate_map, obs = _observer_run(ctx, q_GS, m, b_ref)
     usable = (obs.mode == MODE_CORRECTED) & obs.stationary
     if np.count_nonzero(usable) < 2:
         raise CalibrationError("the drift observer never reached its stationary gains in a calibration interval")
@@ -392,7 +386,34 @@ def _pass(
         "scale_factor_error": new.scale_factor_error,
         "drift_offset_rad_s": new.drift_offset(t_st[-1]).tolist(), "change_sigma": change,
     }
-    return _Pass(new, obs, rot, rate_map, b_ref, new_model, usable, change, record)
+    return _Pass(new, obs, rot, rate_map, b_ref, new_model, usable, change, record, q_GS, m)
+
+
+def _observer_run(ctx: _Context, q_GS: FloatArray, m: float, b_ref: FloatArray
+                  ) -> tuple[IntervalRotations, FloatArray, DriftObserverResult]:
+    """Eq. 7 integration with a calibration (q_GS, m, reference drift) and the drift observer on it."""
+    cfg = ctx.cfg
+    rot = interval_rotations(ctx.plan, q_GX=q_GS, scale_factor_error=m, drift=b_ref)
+    on = correction_flags(rot.max_rate_rad_s, rot.valid, cfg.rate_threshold_rad_s)
+    rate_map = rotations.quat_to_dcm(rotations.quat_conjugate(q_GS)) / (1.0 + m)
+    obs = run_drift_observer(
+        ctx.t_st, ctx.q_st, rot.q, rot.rotvec_rad, rot.valid, on, rate_map=rate_map, drift_ref_rad_s=b_ref,
+        t_r_s=cfg.t_r_s, xi=cfg.xi, acquisition=cfg.acquisition, trend_window_s=cfg.trend_window_s,
+        trend_degree=cfg.trend_degree,
+    )
+    return rot, rate_map, obs
+
+
+def _end_drift(ctx: _Context, obs: DriftObserverResult) -> tuple[FloatArray, DriftTrend, NDArray[np.bool_]]:
+    """The drift at the end of the data (trend of the usable estimates of the last trend window), that
+    trend and the samples it was fitted to."""
+    cfg, t_st = ctx.cfg, ctx.t_st
+    usable = (obs.mode == MODE_CORRECTED) & obs.stationary
+    last = usable & (t_st >= t_st[-1] - cfg.trend_window_s)
+    if not np.any(last):
+        last = usable
+    trend = fit_drift_trend(t_st[last], obs.drift_rad_s[last], cfg.trend_degree).shifted(ctx.lag)
+    return trend(t_st[-1]), trend, last
 
 
 @dataclass(frozen=True)
@@ -447,13 +468,14 @@ def _drift_summary(ctx: _Context, passes: _Passes) -> _DriftSummary:
     noise = np.std(dev, axis=0) if dev.shape[0] > 1 else np.full(3, np.nan)
     corrected = obs.mode == MODE_CORRECTED
     conv = drift_convergence_time(t_st, obs.drift_rad_s, corrected, model(t_st), cfg.convergence_tolerance_rad_s)
-    sigma, tau = _end_drift_sigma(ctx, p, last, end_trend)
-    return _DriftSummary(end_trend(t_st[-1]), noise, conv, sigma, tau)
+    sigma, tau, shift = _end_drift_sigma(ctx, p, last, end_trend)
+    return _DriftSummary(end_trend(t_st[-1]) + shift, noise, conv, sigma, tau)
 
 
 def _end_drift_sigma(ctx: _Context, p: _Pass, last: NDArray[np.bool_], trend: DriftTrend
-                     ) -> tuple[FloatArray, FloatArray]:
-    """Sigma (3,) of the end-of-data drift trend and the correlation time (3,) of the estimates.
+                     ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Sigma (3,) of the end-of-data drift trend, the correlation time (3,) of the estimates and the
+    change (3,) of the end drift from the observer's calibration to the final one (G of term ii).
 
     The trend's end value is a linear functional L of the estimates b_k of the last window (LSQ polynomial
     of the trend's degree). Two error terms: (i) the estimates' noise about the trend, correlated with
@@ -464,7 +486,7 @@ def _end_drift_sigma(ctx: _Context, p: _Pass, last: NDArray[np.bool_], trend: Dr
     est = p.est
     t = ctx.t_st[last]
     if t.size < 3 or not np.all(est.drift_observable):
-        return np.full(3, np.nan), np.full(3, np.nan)
+        return np.full(3, np.nan), np.full(3, np.nan), np.zeros(3)
     x = (t - trend.t_ref_s) / trend.scale_s
     x_end = (ctx.t_st[-1] + ctx.lag - trend.t_ref_s) / trend.scale_s
     powers = np.arange(trend.degree + 1)
@@ -476,18 +498,45 @@ def _end_drift_sigma(ctx: _Context, p: _Pass, last: NDArray[np.bool_], trend: Dr
     tau = np.where(rho1 > 0, -t_o / np.log(np.clip(rho1, 1e-12, 1.0 - 1e-12)), 0.0)
     dt = np.abs(t[:, None] - t[None, :])
     var_noise = np.array([s2[a] * (func @ np.exp(-dt / max(tau[a], 1e-9 * t_o)) @ func) for a in range(3)])
-    # rates of the samples: mean of the gyro interval rotations on both sides (star-tracker axes)
-    rv = p.rot.rotvec_rad / np.diff(ctx.t_st)[:, None]
-    idx = np.flatnonzero(last)
-    w = 0.5 * (rv[np.clip(idx - 1, 0, rv.shape[0] - 1)] + rv[np.clip(idx, 0, rv.shape[0] - 1)])
+    sens, cov = _calibration_sensitivity(ctx, p)
+    var_cal = np.diag(sens @ cov @ sens.T)
+    # the observer ran with the last-but-one calibration: move the end drift to the final one (linear)
+    d_theta = rotations.quat_to_rotvec(rotations.quat_multiply(rotations.quat_conjugate(p.q_GS_in), est.q_GS))
+    shift = sens @ np.concatenate([[est.scale_factor_error - p.m_in], d_theta])
+    return np.sqrt(var_noise + var_cal), tau, shift
+
+
+SENSITIVITY_STEP_SCALE = 1e-4
+"""Step of the finite differences of :func:`_calibration_sensitivity` in the scale factor; the misalignment
+step is the same number in rad (20"): linear regime of the observer, far above round-off."""
+
+
+def _calibration_sensitivity(ctx: _Context, p: _Pass) -> tuple[FloatArray, FloatArray]:
+    """Variance (3,) of the end drift due to the calibration errors: the observer absorbs the apparent
+    drift (1 + m) R(q_GS) (dm w - w x dtheta) while it corrects, and keeps what it absorbed during a scan
+    through the following holds, so its response is that of the whole chain: G = d(end drift) / d(m,
+    theta) by finite differences of the last observer run (4 more runs; theta as q_GS o exp(theta)).
+    Returns G (3, 4) and the covariance (4, 4) of (m, theta) on the determinable subspace."""
+    est = p.est
     n_m = est.covariance.shape[0] - 3 - 3 * (est.drift_offset.degree + 1)
-    m_cols = w[:, :, None] if n_m == 1 else np.zeros((w.shape[0], 3, n_m))
-    jac = np.concatenate([m_cols, -rotations.skew(w)], axis=2)  # (n, 3, n_m + 3)
-    gain = np.einsum("n,nkp->kp", func, jac)
-    dcm = (1.0 + est.scale_factor_error) * rotations.quat_to_dcm(est.q_GS)
-    cov_c = np.nan_to_num(est.covariance[: n_m + 3, : n_m + 3])
-    var_cal = np.diag(dcm @ gain @ cov_c @ gain.T @ dcm.T)
-    return np.sqrt(var_noise + var_cal), tau
+    if n_m != 1:  # per-axis factors: the chain applies the scalar one; its variance is scale_factor_sigma^2
+        cov = np.zeros((4, 4))
+        cov[0, 0] = est.scale_factor_sigma**2
+        cov[1:, 1:] = est.covariance[n_m : n_m + 3, n_m : n_m + 3]
+    else:
+        cov = est.covariance[:4, :4]
+    base, _, _ = _end_drift(ctx, p.obs)
+    h = SENSITIVITY_STEP_SCALE
+    sens = np.zeros((3, 4))
+    for k in range(4):  # 4 observer runs, each vectorised over the samples
+        q, m = p.q_GS_in, p.m_in
+        if k == 0:
+            m = m + h
+        else:
+            q = rotations.quat_multiply(q, rotations.rotvec_to_quat(h * np.eye(3)[k - 1]))
+        _, _, obs = _observer_run(ctx, q, m, p.b_ref)
+        sens[:, k] = (_end_drift(ctx, obs)[0] - base) / h
+    return sens, np.nan_to_num(cov)
 
 
 def _slew_report(ctx: _Context, passes: _Passes, drift_noise_rad_s: FloatArray) -> SlewReport:

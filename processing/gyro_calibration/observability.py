@@ -129,14 +129,17 @@ class Observability:
         """Orthonormal basis (k, m) of the null directions' projection on the parameters ``rows`` (in their
         units), keeping the projections longer than null_threshold (e.g. the misalignment rotations that
         the data do not determine)."""
-        null = (self.parameter_scale[:, None] * self.eigenvectors)[:, self.eigenvalues < self.rank_tolerance][rows]
+        # a zero column (scale 0) is a null direction by itself: give it a scale far above the others
+        scale = np.where(self.parameter_scale > 0, self.parameter_scale, 1e6 * max(float(self.parameter_scale.max()),
+                                                                                    1e-300))
+        null = (scale[:, None] * self.eigenvectors)[:, self.eigenvalues < self.rank_tolerance][rows]
         if null.size == 0:
             return np.zeros((null.shape[0], 0))
         norm = np.linalg.norm(null, axis=0)
         null = null / np.where(norm > 0, norm, 1.0)
         part = np.linalg.norm(self.eigenvectors[:, self.eigenvalues < self.rank_tolerance][rows], axis=0)
         u, sv, _ = np.linalg.svd(null[:, part > self.null_threshold], full_matrices=False)
-        return u[:, sv > 1e-6]
+        return u[:, sv > 0.3]  # unit columns: directions that differ, not round-off
 
     def flags(self, prefix: str) -> NDArray[np.bool_]:
         """Determinable flags of the parameters whose name starts with prefix (e.g. "misalignment_")."""
