@@ -40,15 +40,24 @@ and the scale factor follows from the ratios of the magnitudes. Details of this 
   sufficient statistic of Wahba's problem (K of eq. 9 depends on B only), so the n pairs are replaced by
   the three pairs of its singular value decomposition, B = sum s_k u_k v_k^T, which have the same B,
   the same K and the same solution.
-- uncertainty: samples of one window are strongly correlated (one polynomial), so the covariance of
-  (dm, dtheta, db) is the delete-one-window jackknife of that linear least squares (which, with equal
-  weights on the rate residuals, is the linearisation of the weighted QUEST + scale estimate).
-- observability: the misalignment about an axis is seen only through rates perpendicular to it. The
-  spread matrix F = sum alpha_i (I - a_i a_i^T) / sum alpha_i (trace 2; eigenvalues 0, 1, 1 for rates
-  about one axis only) is reported with its eigen-decomposition; a direction with an eigenvalue below
-  ``min_spread`` or a jackknife sigma above ``max_sigma_rad`` is unobservable: its component is held at
-  the prior value (the nominal mounting), and every axis with a component above 0.1 along it is
-  reported as unknown.
+- observability (issue 17): the normal (information) matrix of the linear step over the full parameter set
+  (scale factor: scalar or per gyro axis; misalignment 3; drift 3 and its higher terms) decides what the
+  rate history determines (processing.gyro_calibration.observability: unit-diagonal eigenvalues below
+  ``rank_tolerance`` are null directions; a parameter with a component above 0.1 in them is
+  undeterminable). The linear step is solved on the determinable subspace; the rotation directions in
+  the null space, or with a rate-direction spread below ``min_spread`` (the spread matrix F = sum
+  alpha_i (I - a_i a_i^T) / sum alpha_i, trace 2, eigenvalues 0, 1, 1 for rates about one axis), are
+  held at the prior (the nominal mounting at first); an axis is observable when the information matrix
+  determines it, no held direction has a component above 0.1 along it and its sigma is at most
+  ``max_sigma_rad``. A constant rate vector (nadir pointing) determines none of them.
+- uncertainty: samples of one window are one polynomial, so they are strongly correlated; the
+  covariance is that of the linear step on the determinable subspace, N+ M N+ with M from the white
+  star-tracker noise through the window polynomials (:class:`RateNoise`, WindowRates.rate_noise_gain),
+  scaled by the residual variance factor (observed / expected weighted squared rate residuals, which
+  also carry the gyro spline's error) when above 1, and by the delete-one-window jackknife's variance
+  ratio when that is significantly above 1 (chi-square, W - 1 degrees of freedom, 0.1 %); without a
+  noise model the jackknife itself. The jackknife is zero along undetermined directions, so it is never
+  the sigma of an undetermined parameter (they have none).
 
 Times s, rates rad/s, angles rad, quaternions (..., 4) scalar first.
 """
@@ -68,6 +77,7 @@ from processing.gyro_calibration.observability import (
     RANK_TOLERANCE,
     Observability,
     analyse_information,
+    noise_floor,
     noise_meat,
     parameter_jacobian,
     subspace_covariance,
@@ -214,7 +224,10 @@ def star_tracker_window_rates(
     # Var(sigma') = var_sigma d^T (V^T V)^-1 d / half^2; angle noise = 4 sigma noise and w ~ 4 sigma'.
     # The rate error per unit angle noise n_k at the window's samples: e_i = d_i^T G V^T (n / 4) 4 / half.
     gram_inv = np.linalg.inv(vt @ v)
-    gain = np.einsum("nkp,npq,nq->nk", v[window], gram_inv[window], dpowers) / half[window][:, None]
+    vg = v @ gram_inv  # (W, width, degree + 1)
+    d_pad = np.zeros((w_count, int(counts.max()), degree + 1))  # the T_p samples of each window, padded
+    d_pad[window, offset] = dpowers
+    gain = (d_pad @ np.swapaxes(vg, 1, 2))[window, offset] / half[window][:, None]  # (n, width)
     var = np.sum(gain**2, axis=1)
     return WindowRates(t_s=tp, window=window, w_A_rad_s=rate_from_mrp(s_fit, s_dot), rate_variance_s2=var,
                        starts=a, stops=b, residual_rms_rad=rms, rate_noise_gain=gain)
@@ -453,9 +466,14 @@ def _linear_step(smp: _Samples, q_prior: FloatArray, m0: float, drift_degree: in
     x_t = (t - t_ref) / scale
     r = rotations.quat_rotate(q_SG, g) / (1.0 + m0) - a_vec
     jac, names = parameter_jacobian(a_vec, x_t, q_prior, drift_degree=drift_degree, per_axis_scale_factor=per_axis)
-    n_tot = np.einsum("n,nki,nkj->ij", smp.sw, jac, jac)
-    v_tot = np.einsum("n,nki,nk->i", smp.sw, jac, r)
-    info = analyse_information(n_tot, names, rank_tolerance=rank_tolerance)
+    p = jac.shape[2]
+    jw = jac * smp.sw[:, None, None]
+    n_tot = jw.reshape(-1, p).T @ jac.reshape(-1, p)
+    v_tot = jw.reshape(-1, p).T @ r.reshape(-1)
+    floor = None
+    if smp.noise is not None:  # what the rate noise alone puts on the diagonal (observability, step 0)
+        floor = noise_floor(names, smp.sw * np.sum(smp.noise.gain**2, axis=1), smp.noise.sigma_rad, q_prior)
+    info = analyse_information(n_tot, names, rank_tolerance=rank_tolerance, noise_floor=floor)
     det = info.determinable
     n_plus = truncated_inverse(n_tot, rank_tolerance)
     x = n_plus @ v_tot
@@ -495,8 +513,9 @@ def _linear_step(smp: _Samples, q_prior: FloatArray, m0: float, drift_degree: in
 def _jackknife(jac: FloatArray, r: FloatArray, smp: _Samples, n_tot: FloatArray, v_tot: FloatArray, n_win: int,
                rank_tolerance: float) -> FloatArray:
     """Delete-one-window jackknife covariance (p, p) of the subspace estimate (zero along null directions)."""
-    nn = np.einsum("n,nki,nkj->nij", smp.sw, jac, jac)
-    vv = np.einsum("n,nki,nk->ni", smp.sw, jac, r)
+    jw = jac * smp.sw[:, None, None]
+    nn = np.matmul(np.swapaxes(jw, 1, 2), jac)
+    vv = np.matmul(np.swapaxes(jw, 1, 2), r[:, :, None])[:, :, 0]
     order = np.argsort(smp.wid, kind="stable")
     first = np.flatnonzero(np.diff(smp.wid[order], prepend=-1))  # window ids are 0..W-1, all present
     big_n, big_v = np.add.reduceat(nn[order], first, axis=0), np.add.reduceat(vv[order], first, axis=0)

@@ -17,6 +17,10 @@ neither the scale factor nor the misalignment nor the drift, only the apparent d
 
 Determinability (documented in the README, section of alignment_calibration):
 
+0. the Jacobian is built from the measured rates: a column that the true rates do not excite is still
+   filled by the rate noise (theta about the axis of a constant rate), and scaled to unit diagonal it
+   would look informative; a column of m or theta whose diagonal is below NOISE_FLOOR_FACTOR (100) times
+   what the noise alone gives (:func:`noise_floor`) is set to zero (undeterminable);
 1. scale N to unit diagonal, C = D N D with D = diag(N)^-1/2 (unit-free; a parameter with a zero
    column is undeterminable at once);
 2. eigen-decompose C; an eigenvalue below ``rank_tolerance`` x the largest is a null direction: a
@@ -53,6 +57,7 @@ __all__ = [
     "Observability",
     "analyse_information",
     "motion_summary",
+    "noise_floor",
     "noise_meat",
     "parameter_jacobian",
     "subspace_covariance",
@@ -153,11 +158,46 @@ def _unit_diagonal(normal: FloatArray) -> tuple[FloatArray, FloatArray]:
     return normal * inv[:, None] * inv[None, :], d
 
 
+def noise_floor(names: tuple[str, ...], weighted_variance: FloatArray, sigma_rad: FloatArray,
+                q_GS: FloatArray) -> FloatArray:
+    """Diagonal (p,) that the star-tracker rate noise alone puts on N (step 0 of the module docstring).
+
+    The Jacobian is built from the measured rates a = w + e: a column of m or theta holds sum w_i |J_j(e_i)|^2
+    even when the true rates do not excite it (theta about the axis of a constant rate). weighted_variance
+    (n,): w_i times the rate variance per unit angle variance (sum_k gain_ik^2); sigma_rad (3,) the angle
+    noise per axis. Scale factor: sum_a sigma_a^2; theta_k: sum_{a != k} sigma_a^2; per-axis m_k:
+    sum_a R_ka^2 sigma_a^2; drift: 0."""
+    s2 = np.asarray(sigma_rad, dtype=np.float64) ** 2
+    total = float(np.sum(weighted_variance))
+    dcm = rotations.quat_to_dcm(np.asarray(q_GS, dtype=np.float64))
+    out = np.zeros(len(names))
+    for j, name in enumerate(names):
+        if name == "scale_factor":
+            out[j] = total * float(s2.sum())
+        elif name.startswith("scale_factor_"):
+            out[j] = total * float(dcm["xyz".index(name[-1])] ** 2 @ s2)
+        elif name.startswith("misalignment_"):
+            out[j] = total * float(s2.sum() - s2["xyz".index(name[-1])])
+    return out
+
+
+NOISE_FLOOR_FACTOR = 100.0
+"""A column of m or theta whose diagonal is below this factor times its noise floor (its excitation by the
+true rates less than 10 times the noise in rms) is undeterminable (step 0)."""
+
+
 def analyse_information(normal: FloatArray, names: tuple[str, ...], *, rank_tolerance: float = RANK_TOLERANCE,
-                        null_threshold: float = NULL_COMPONENT) -> Observability:
-    """Determinable parameters of a normal matrix (p, p) (steps 1-4 of the module docstring)."""
+                        null_threshold: float = NULL_COMPONENT, noise_floor: FloatArray | None = None
+                        ) -> Observability:
+    """Determinable parameters of a normal matrix (p, p) (steps 0-4 of the module docstring); noise_floor
+    (p,): :func:`noise_floor` (step 0; None: skipped)."""
     nn = np.asarray(normal, dtype=np.float64)
     p = nn.shape[0]
+    if noise_floor is not None:  # step 0: a column that only the rate noise fills carries no information
+        weak = np.diag(nn) <= NOISE_FLOOR_FACTOR * np.asarray(noise_floor, dtype=np.float64)
+        nn = nn.copy()
+        nn[weak, :] = 0.0
+        nn[:, weak] = 0.0
     c, d = _unit_diagonal(nn)
     lam, vec = np.linalg.eigh(c)
     top = max(float(lam[-1]), 1e-300)
@@ -200,8 +240,8 @@ def noise_meat(jac: FloatArray, weight: FloatArray, gain: FloatArray, window: ND
     first = np.flatnonzero(np.diff(window[order], prepend=-1))
     contrib = (weight[:, None] * gain)[:, :, None, None] * jac[:, None, :, :]  # (n, width, 3, p)
     h = np.add.reduceat(contrib[order], first, axis=0)  # (W, width, 3, p)
-    s2 = np.asarray(sigma_rad, dtype=np.float64) ** 2
-    return np.einsum("wkap,a,wkaq->pq", h, s2, h)
+    hs = (h * np.asarray(sigma_rad, dtype=np.float64)[None, None, :, None]).reshape(-1, jac.shape[2])
+    return hs.T @ hs
 
 
 def truncated_inverse(normal: FloatArray, rank_tolerance: float = RANK_TOLERANCE) -> FloatArray:
