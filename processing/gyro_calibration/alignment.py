@@ -367,8 +367,9 @@ def estimate_alignment(
     if per_axis_scale_factor:
         # the weighted mean of the per-axis factors is what the magnitude ratio estimates
         sf_sigma = float(np.sqrt(_per_axis_mean_variance(lin.cov[:3, :3], smp, q_prior))) if np.all(sf_det) else np.nan
-        per_axis = np.where(sf_det, m0 + lin.x[:3], np.nan)
-        per_axis_sigma = np.where(sf_det, np.sqrt(var_m), np.nan)
+        # the residual divides by the scalar prior: dm_k = (m_k - m0) / (1 + m0)
+        per_axis = np.where(sf_det, m0 + (1.0 + m0) * lin.x[:3], np.nan)
+        per_axis_sigma = np.where(sf_det, (1.0 + m0) * np.sqrt(var_m), np.nan)
     else:
         sf_sigma = float(np.sqrt(var_m[0])) if sf_det[0] else np.nan
         per_axis = per_axis_sigma = np.full(3, np.nan)

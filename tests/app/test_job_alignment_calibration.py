@@ -212,3 +212,14 @@ def test_input_errors(scenario):
         JOB.run(_inputs(short, scenario.config), JOB.params(), no_progress)
     with pytest.raises(TaskError, match="gyro_increments samples"):
         JOB.run(_inputs(only_st, scenario.config), JOB.params(gyro_source="gyro_increments"), no_progress)
+
+
+def test_per_axis_scale_factor_option(scenario):
+    """per_axis_scale_factor: m per gyro axis with its sigma and flags (here the truth is the same on all axes)."""
+    res = JOB.run(_inputs(scenario.streams, scenario.config), JOB.params(per_axis_scale_factor=True), no_progress)
+    s = res.summary
+    assert s["scale_factor_observable"] == [True, True, True] and res.warnings == []
+    assert s["observability"]["parameters"][:3] == ["scale_factor_x", "scale_factor_y", "scale_factor_z"]
+    m, sig = np.array(s["scale_factor_error_per_axis"]), np.array(s["scale_factor_error_per_axis_sigma"])
+    assert np.all(np.abs(m - scenario.truth.scale_factor_error) < 3 * sig) and np.all(sig < 2e-5)
+    assert abs(s["scale_factor_error"] - scenario.truth.scale_factor_error) < 3 * s["scale_factor_error_sigma"]
