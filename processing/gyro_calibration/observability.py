@@ -54,6 +54,7 @@ from numpy.typing import NDArray
 from processing.attitude import rotations
 
 __all__ = [
+    "Motion",
     "Observability",
     "analyse_information",
     "motion_summary",
@@ -272,10 +273,20 @@ def subspace_covariance(normal: FloatArray, meat: FloatArray | None, rank_tolera
     return scale * 0.5 * (block + block.T)
 
 
-def motion_summary(w_A_rad_s: FloatArray, weight: FloatArray) -> dict[str, object]:
+@dataclass(frozen=True)
+class Motion:
     """The rate history of the windows in numbers for the messages: the principal rotation axes (3, 3)
-    columns (S axes) of the rate second-moment matrix with the rms rate about each [rad/s], and the
-    mean and std of |w| [rad/s]."""
+    columns (S axes) of the weighted rate second-moment matrix, the rms rate about each (3,) [rad/s],
+    and the weighted mean and std of |w| [rad/s]."""
+
+    axes: FloatArray
+    rms_rate_rad_s: FloatArray
+    mean_rate_rad_s: float
+    std_rate_rad_s: float
+
+
+def motion_summary(w_A_rad_s: FloatArray, weight: FloatArray) -> Motion:
+    """:class:`Motion` of rates (n, 3) with weights (n,)."""
     a = np.asarray(w_A_rad_s, dtype=np.float64)
     w = np.asarray(weight, dtype=np.float64)
     w = w / max(float(w.sum()), 1e-300)
@@ -283,5 +294,5 @@ def motion_summary(w_A_rad_s: FloatArray, weight: FloatArray) -> dict[str, objec
     lam, axes = np.linalg.eigh(second)
     mag = np.linalg.norm(a, axis=1)
     mean = float(np.sum(w * mag))
-    return {"axes": axes[:, ::-1], "rms_rate_rad_s": np.sqrt(np.maximum(lam[::-1], 0.0)), "mean_rate_rad_s": mean,
-            "std_rate_rad_s": float(np.sqrt(max(float(np.sum(w * (mag - mean) ** 2)), 0.0)))}
+    return Motion(axes=axes[:, ::-1], rms_rate_rad_s=np.sqrt(np.maximum(lam[::-1], 0.0)), mean_rate_rad_s=mean,
+                  std_rate_rad_s=float(np.sqrt(max(float(np.sum(w * (mag - mean) ** 2)), 0.0))))

@@ -10,9 +10,17 @@ Summary (DESIGN.md): ``misalignment_rad`` = rotation vector of the misalignment 
 o q_GS^-1, S^Delta ~ I + [misalignment x]) relative to the configured mounting (identical to rotvec(q_GS)
 when the configuration has the gyro aligned with the star tracker), ``misalignment_quaternion``,
 ``misalignment_sigma_rad``, ``scale_factor_error`` (w_meas = (1 + m) S^Delta w + b), ``drift_rad_s`` (b
-in the gyro frame at the end of the window), ``drift_convergence_s``, ``calibration_windows``; an axis
-whose misalignment the rate directions do not determine is reported as null. ``calibration`` holds the
-calibration version the service should store for the spacecraft's gyro. Figures follow 000 figs. 5-8.
+in the gyro frame at the end of the window) with ``drift_sigma_rad_s``, ``drift_convergence_s``,
+``calibration_windows``. Observability (issue 17; processing.gyro_calibration.observability): the
+information matrix of (scale factor, misalignment, drift) from the rate history decides what is
+determined; an undetermined value is null with ``misalignment_observable[3]``, ``scale_factor_observable``
+(per axis with ``per_axis_scale_factor``), ``drift_observable[3]`` false and a ``not_observable`` warning
+saying which motion would determine it; ``observability`` holds the analysis; ``apparent_drift_rad_s`` is
+the drift that compensates the gyro under the arc's own motion (what a constant-rate arc does
+determine). ``plausibility`` holds the star-tracker-against-gyro check (app.jobs.plausibility), whose
+time offset is copied to ``time_offset_s`` / ``time_offset_sigma_s``. ``calibration`` holds the
+calibration version the service stores for the spacecraft's gyro, only when ``calibration_complete``
+(everything determined and the iteration converged). Figures follow 000 figs. 5-8.
 """
 
 from __future__ import annotations
@@ -371,9 +379,9 @@ def _observability_warnings(r: _Run) -> list[ResultWarning]:
     used = r.cal.windows_used[win.window]
     motion = motion_summary(win.w_A_rad_s[used], 1.0 / win.rate_variance_s2[used])
     dcm_BS = rotations.quat_to_dcm(r.q_BS)
-    axes_B = dcm_BS @ np.asarray(motion["axes"])
-    rms = np.asarray(motion["rms_rate_rad_s"]) / RAD_PER_DEG
-    mean, std = float(motion["mean_rate_rad_s"]) / RAD_PER_DEG, float(motion["std_rate_rad_s"]) / RAD_PER_DEG
+    axes_B = dcm_BS @ motion.axes
+    rms = motion.rms_rate_rad_s / RAD_PER_DEG
+    mean, std = motion.mean_rate_rad_s / RAD_PER_DEG, motion.std_rate_rad_s / RAD_PER_DEG
 
     def axis(v: NDArray[np.float64]) -> str:
         return "body (" + ", ".join(f"{c:+.2f}" for c in v) + ")"
@@ -659,8 +667,9 @@ JOB = JobType(
         "Gyro drift, gyro-to-star-tracker misalignment and scale-factor error from flight data (000): two-pass "
         "filtering of the gyro increments, a nonlinear Luenberger drift observer that is switched off during fast "
         "slews (drift predicted from its trend), QUEST alignment and scale factor from gyro vs star-tracker rates in "
-        "12-18 s windows of slow motion, iterated until the change is below noise. Unobservable misalignment axes "
-        "are reported as null."
+        "12-18 s windows of slow motion, iterated until the change is below noise. What the rate history does not "
+        "determine (information matrix of misalignment, scale factor and drift) is reported as null with a "
+        "not_observable warning."
     ),
     headline=(Answer("misalignment_rad", "Gyro-to-star-tracker misalignment (rotation vector of q_GS)",
                      sigma="misalignment_sigma_rad", frame="gyro G relative to star tracker {sensor} (S)"),
