@@ -675,5 +675,6 @@ JOB = JobType(
                      sigma="misalignment_sigma_rad", frame="gyro G relative to star tracker {sensor} (S)"),
               Answer("scale_factor_error", "Gyro scale-factor error m", sigma="scale_factor_error_sigma", unit="ppm",
                      scale=1e6),
-              Answer("drift_rad_s", "Gyro drift b at the end of the window", frame="gyro (G)")),
+              Answer("drift_rad_s", "Gyro drift b at the end of the window", sigma="drift_sigma_rad_s",
+                     frame="gyro (G)")),
 )
