@@ -64,7 +64,7 @@ Times s, rates rad/s, angles rad, quaternions (..., 4) scalar first.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -265,7 +265,10 @@ class AlignmentEstimate:
     significantly larger; zero along undetermined directions, so never the sigma by itself);
     residual_variance_factor: observed over expected weighted squared rate residuals (the covariance is
     scaled by it when above 1); scale_factor_per_axis (3,) and its sigma: m per gyro axis from the
-    linear step when estimated (per_axis_scale_factor), else NaN.
+    linear step when estimated (per_axis_scale_factor), else NaN; rate_offset_sigma_rad_s (3,): the
+    sigma of a constant rate offset estimated alone from these windows (their noise; NaN without a noise
+    model): the misalignment sigma that a rms rate w perpendicular to an axis would give is about
+    rate_offset_sigma / w, the scale-factor sigma for a spread (std) s of |w| about rate_offset_sigma / s.
     """
 
     q_GS: FloatArray
@@ -291,6 +294,7 @@ class AlignmentEstimate:
     residual_variance_factor: float
     scale_factor_per_axis: FloatArray
     scale_factor_per_axis_sigma: FloatArray
+    rate_offset_sigma_rad_s: FloatArray = field(default_factory=lambda: np.full(3, np.nan))
 
     @property
     def misalignment_sigma_rad(self) -> FloatArray:
@@ -383,7 +387,18 @@ def estimate_alignment(
         drift_observable=lin.observability.flags("drift_") if drift_degree is not None else np.zeros(3, dtype=bool),
         covariance=lin.cov, jackknife_cov=lin.jackknife_cov, residual_variance_factor=lin.variance_factor,
         scale_factor_per_axis=per_axis, scale_factor_per_axis_sigma=per_axis_sigma,
+        rate_offset_sigma_rad_s=_rate_offset_sigma(smp, lin.variance_factor),
     )
+
+
+def _rate_offset_sigma(smp: _Samples, factor: float) -> FloatArray:
+    """Sigma (3,) of a constant rate offset estimated alone (weighted mean) from the windows' noise."""
+    if smp.noise is None:
+        return np.full(3, np.nan)
+    eye = np.broadcast_to(np.eye(3), (smp.t.size, 3, 3))
+    meat = noise_meat(eye, smp.sw, smp.noise.gain, smp.wid, smp.noise.sigma_rad)
+    scale = max(1.0, factor) if np.isfinite(factor) else 1.0
+    return np.sqrt(scale * np.diag(meat)) / float(np.sum(smp.sw))
 
 
 def _per_axis_mean_variance(cov_m: FloatArray, smp: _Samples, q_prior: FloatArray) -> float:

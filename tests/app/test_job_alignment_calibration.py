@@ -125,6 +125,10 @@ def test_constant_rate_arc_determines_nothing(nadir):
     msg = res.warnings[0].message
     assert "misalignment about x" in msg and "the scale factor" in msg and "drift z" in msg
     assert "rotate also about" in msg and "vary the rate magnitude" in msg
+    # how fast: about the rate that would give a 1" misalignment sigma with windows like these (000's ~0.3-0.9
+    # deg/s scans give ~1" on 15 min, tests above) and the rate spread for a 0.005 % scale-factor sigma
+    need = res.warnings[0].evidence["rate_needed_deg_s"]
+    assert 0.05 <= need["misalignment_1_arcsec"] < 1.0 and 0.01 <= need["scale_factor_0_005_percent_spread"] < 1.0
     # the missing rotation axes are the body axes perpendicular to the pitch axis (body y)
     axes = np.array(res.warnings[0].evidence["rate_axes_body"])
     assert abs(axes[0][1]) > 0.999 and np.all(np.abs(axes[1:, 1]) < 0.01)

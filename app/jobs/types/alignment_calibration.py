@@ -387,20 +387,27 @@ def _observability_warnings(r: _Run) -> list[ResultWarning]:
         return "body (" + ", ".join(f"{c:+.2f}" for c in v) + ")"
 
     weak = [i for i in range(1, 3) if rms[i] < 0.1 * rms[0]]
+    # rates that would give a 1" misalignment sigma and a 0.005 % scale-factor sigma (000's targets) with
+    # windows like these: sigma_theta ~ sigma_offset / w_perp, sigma_m ~ sigma_offset / std|w|
+    offset = float(np.nanmax(est.rate_offset_sigma_rad_s)) if np.any(np.isfinite(est.rate_offset_sigma_rad_s)) \
+        else float("nan")
+    need_w = max(offset / RAD_PER_ARCSEC / RAD_PER_DEG, 0.05) if np.isfinite(offset) else 0.1
+    need_s = max(offset / 5e-5 / RAD_PER_DEG, 0.01) if np.isfinite(offset) else 0.1
     advice = []
     if any(u.startswith("misalignment") for u in undet):
         if weak:
-            advice.append("rotate also about " + " and ".join(axis(axes_B[:, i]) for i in weak)
-                          + f" at >= 0.1 deg/s for at least a few 12-18 s windows (the arc turns mainly about "
-                          f"{axis(axes_B[:, 0])} at {rms[0]:.3f} deg/s rms; about the others only "
-                          + ", ".join(f"{rms[i]:.4f}" for i in range(1, 3)) + " deg/s)")
+            advice.append("rotate also about " + " or ".join(axis(axes_B[:, i]) for i in weak)
+                          + f" at >= {need_w:.2g} deg/s rms in the slow (<= 1 deg/s) windows, as many as here, for a "
+                          f"1 arcsec sigma (the arc turns mainly about {axis(axes_B[:, 0])} at {rms[0]:.3f} deg/s "
+                          "rms; about the others only " + ", ".join(f"{rms[i]:.4f}" for i in range(1, 3)) + " deg/s)")
         else:
             advice.append("rotate about more directions (the misalignment about an axis is seen only through rates "
                           "perpendicular to it)")
     if any(u.startswith(("the scale factor", "drift", "scale factor")) for u in undet):
-        advice.append(f"vary the rate magnitude and sense (|w| is {mean:.3f} +- {std:.4f} deg/s here: the scale "
-                      "factor and the drift along the rate axis are separated only by changes of the rate, e.g. "
-                      "scans at 0.3-1 deg/s in both senses about several axes)")
+        advice.append(f"vary the rate magnitude and sense (|w| is {mean:.3f} +- {std:.4f} deg/s here; a spread of "
+                      f">= {need_s:.2g} deg/s gives a 0.005 % scale-factor sigma: the scale factor and the drift "
+                      "along the rate axis are separated only by changes of the rate, e.g. scans at 0.3-1 deg/s in "
+                      "both senses about several axes)")
     message = ("the rate history of the calibration windows does not determine " + ", ".join(undet)
                + " (reported as null; no calibration version is stored). To determine them: "
                + "; ".join(advice) + ".")
@@ -411,6 +418,8 @@ def _observability_warnings(r: _Run) -> list[ResultWarning]:
         "null_component": _floats(info.null_component), "rate_axes_body": [_floats(axes_B[:, i]) for i in range(3)],
         "rms_rate_deg_s": _floats(rms), "rate_magnitude_deg_s": {"mean": mean, "std": std},
         "rate_spread_eigenvalues": _floats(est.spread_eigenvalues),
+        "rate_offset_sigma_arcsec_s": _floats(est.rate_offset_sigma_rad_s / RAD_PER_ARCSEC),
+        "rate_needed_deg_s": {"misalignment_1_arcsec": need_w, "scale_factor_0_005_percent_spread": need_s},
     }
     return [ResultWarning("not_observable", message, evidence)]
 
