@@ -40,33 +40,54 @@ and the scale factor follows from the ratios of the magnitudes. Details of this 
   sufficient statistic of Wahba's problem (K of eq. 9 depends on B only), so the n pairs are replaced by
   the three pairs of its singular value decomposition, B = sum s_k u_k v_k^T, which have the same B,
   the same K and the same solution.
-- uncertainty: samples of one window are strongly correlated (one polynomial), so the covariance of
-  (dm, dtheta, db) is the delete-one-window jackknife of that linear least squares (which, with equal
-  weights on the rate residuals, is the linearisation of the weighted QUEST + scale estimate).
-- observability: the misalignment about an axis is seen only through rates perpendicular to it. The
-  spread matrix F = sum alpha_i (I - a_i a_i^T) / sum alpha_i (trace 2; eigenvalues 0, 1, 1 for rates
-  about one axis only) is reported with its eigen-decomposition; a direction with an eigenvalue below
-  ``min_spread`` or a jackknife sigma above ``max_sigma_rad`` is unobservable: its component is held at
-  the prior value (the nominal mounting), and every axis with a component above 0.1 along it is
-  reported as unknown.
+- observability (issue 17): the normal (information) matrix of the linear step over the full parameter set
+  (scale factor: scalar or per gyro axis; misalignment 3; drift 3 and its higher terms) decides what the
+  rate history determines (processing.gyro_calibration.observability: unit-diagonal eigenvalues below
+  ``rank_tolerance`` are null directions; a parameter with a component above 0.1 in them is
+  undeterminable). The linear step is solved on the determinable subspace; the rotation directions in
+  the null space, or with a rate-direction spread below ``min_spread`` (the spread matrix F = sum
+  alpha_i (I - a_i a_i^T) / sum alpha_i, trace 2, eigenvalues 0, 1, 1 for rates about one axis), are
+  held at the prior (the nominal mounting at first); an axis is observable when the information matrix
+  determines it, no held direction has a component above 0.1 along it and its sigma is at most
+  ``max_sigma_rad``. A constant rate vector (nadir pointing) determines none of them.
+- uncertainty: samples of one window are one polynomial, so they are strongly correlated; the
+  covariance is that of the linear step on the determinable subspace, N+ M N+ with M from the white
+  star-tracker noise through the window polynomials (:class:`RateNoise`, WindowRates.rate_noise_gain),
+  scaled by the residual variance factor (observed / expected weighted squared rate residuals, which
+  also carry the gyro spline's error) when above 1, and by the delete-one-window jackknife's variance
+  ratio when that is significantly above 1 (chi-square, W - 1 degrees of freedom, 0.1 %); without a
+  noise model the jackknife itself. The jackknife is zero along undetermined directions, so it is never
+  the sigma of an undetermined parameter (they have none).
 
 Times s, rates rad/s, angles rad, quaternions (..., 4) scalar first.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from processing.attitude import rotations, wahba
 from processing.attitude.mrp_kinematics import rate_from_mrp
+from processing.estimation.chi2 import chi2_isf
 from processing.gyro_calibration.drift_observer import DriftTrend
+from processing.gyro_calibration.observability import (
+    RANK_TOLERANCE,
+    Observability,
+    analyse_information,
+    noise_floor,
+    noise_meat,
+    parameter_jacobian,
+    subspace_covariance,
+    truncated_inverse,
+)
 
 __all__ = [
     "AlignmentError",
     "AlignmentEstimate",
+    "RateNoise",
     "WindowRates",
     "alignment_windows",
     "estimate_alignment",
@@ -77,8 +98,11 @@ FloatArray = NDArray[np.float64]
 
 POLY_DEGREE = 5
 """Degree of the star-tracker MRP polynomial in a window (000: 5)."""
-REGULARISATION = 1e-9
-"""Weight (relative to the total) of three pseudo vector pairs that pin unobservable rotations to the prior."""
+REGULARISATION = 1e-7
+"""Weight (relative to the total) of three pseudo vector pairs that pin unobservable rotations to the prior.
+It also separates the two largest eigenvalues of Wahba's K when all rates are about one axis (the rotation
+about it undetermined): with 1e-9 QUEST's eigenvector lost ~1e-5 rad along the determined directions on such
+arcs; its pull on the determined rotation is this weight times the offset from the prior (~1e-11 rad)."""
 
 
 class AlignmentError(ValueError):
@@ -134,7 +158,10 @@ class WindowRates:
     of each rate component per unit variance of the star-tracker angle noise [1/s^2] (the polynomial
     derivative's error grows from the centre to the ends of a window by a factor ~6 in std); starts,
     stops (W,): sample ranges; residual_rms_rad (W, 3): rms of the polynomial fit residuals as angles
-    (4 sigma) per axis, with the degrees of freedom n_j - 6 (an estimate of the star-tracker noise).
+    (4 sigma) per axis, with the degrees of freedom n_j - 6 (an estimate of the star-tracker noise);
+    rate_noise_gain (n, width): the rate error of each T_p sample per unit angle noise at each star-tracker
+    sample of its window (the k-th from the window's start; zero beyond its end): e_i = sum_k gain_ik n_k,
+    so rate_variance_s2 = sum_k gain_ik^2 (processing.gyro_calibration.observability.noise_meat).
     """
 
     t_s: FloatArray
@@ -144,6 +171,7 @@ class WindowRates:
     starts: NDArray[np.intp]
     stops: NDArray[np.intp]
     residual_rms_rad: FloatArray
+    rate_noise_gain: FloatArray | None = None
 
 
 def star_tracker_window_rates(
@@ -194,10 +222,25 @@ def star_tracker_window_rates(
     s_fit = np.einsum("np,npk->nk", powers, c)
     s_dot = np.einsum("np,npk->nk", dpowers, c) / half[window][:, None]
     # Var(sigma') = var_sigma d^T (V^T V)^-1 d / half^2; angle noise = 4 sigma noise and w ~ 4 sigma'.
-    gram_inv = np.linalg.inv(vt @ v)[window]
-    var = np.einsum("np,npq,nq->n", dpowers, gram_inv, dpowers) / half[window] ** 2
+    # The rate error per unit angle noise n_k at the window's samples: e_i = d_i^T G V^T (n / 4) 4 / half.
+    gram_inv = np.linalg.inv(vt @ v)
+    vg = v @ gram_inv  # (W, width, degree + 1)
+    d_pad = np.zeros((w_count, int(counts.max()), degree + 1))  # the T_p samples of each window, padded
+    d_pad[window, offset] = dpowers
+    gain = (d_pad @ np.swapaxes(vg, 1, 2))[window, offset] / half[window][:, None]  # (n, width)
+    var = np.sum(gain**2, axis=1)
     return WindowRates(t_s=tp, window=window, w_A_rad_s=rate_from_mrp(s_fit, s_dot), rate_variance_s2=var,
-                       starts=a, stops=b, residual_rms_rad=rms)
+                       starts=a, stops=b, residual_rms_rad=rms, rate_noise_gain=gain)
+
+
+@dataclass(frozen=True)
+class RateNoise:
+    """The white star-tracker noise model of the window rates: gain (n, width) of each sample
+    (WindowRates.rate_noise_gain at the samples given to :func:`estimate_alignment`) and the angle
+    noise sigma_rad (3,) per star-tracker axis (e.g. from the window fit residuals)."""
+
+    gain: FloatArray
+    sigma_rad: FloatArray
 
 
 @dataclass(frozen=True)
@@ -206,14 +249,26 @@ class AlignmentEstimate:
 
     q_GS (4,): estimated S^Delta = R(q_GS) (canonical); misalignment_rad (3,): rotation vector of
     q_GS_nominal^-1 o q_GS in star-tracker axes (= rotvec(q_GS) when the nominal is the identity);
-    scale_factor_error: m^; misalignment_cov_rad2 (3, 3), scale_factor_sigma: jackknife over windows;
+    scale_factor_error: m^; misalignment_cov_rad2 (3, 3), scale_factor_sigma (NaN when undeterminable):
+    from the covariance on the determinable subspace (processing.gyro_calibration.observability; zero
+    along the null directions, so only the determinable components' entries are sigmas);
     drift_offset: the residual drift polynomial removed (gyro frame, a DriftTrend);
-    drift_offset_sigma_rad_s (3,): jackknife sigma of its constant term;
+    drift_offset_sigma_rad_s (3,): sigma of its constant term (gyro axes);
     spread_eigenvalues (3,) ascending and spread_axes (3, 3) columns: the rate-direction spread matrix;
-    observable_axes (3,) bool per star-tracker axis; solver_disagreement_rad: largest angle between
-    QUEST, q-method and SVD; n_windows, n_samples; residual_rad_s (n, 3): w^g_S - w^a after the
-    estimate (star-tracker axes); linearised (p,): (dm, dtheta, drift coefficients in S) of the linear
-    step.
+    observable_axes (3,) bool per star-tracker axis (misalignment determinable and its sigma below the
+    limit); scale_factor_observable, drift_observable (3,): determinable by the information matrix;
+    observability: the analysis itself; solver_disagreement_rad: largest angle between QUEST, q-method
+    and SVD; n_windows, n_samples; residual_rad_s (n, 3): w^g_S - w^a after the estimate (star-tracker
+    axes); linearised (p,): the parameters of the linear step (observability.names; the minimum-norm
+    subspace solution); covariance (p, p) of the linear step on the determinable subspace; jackknife_cov
+    (p, p): the delete-one-window jackknife of the same (a cross-check that inflates the covariance when
+    significantly larger; zero along undetermined directions, so never the sigma by itself);
+    residual_variance_factor: observed over expected weighted squared rate residuals (the covariance is
+    scaled by it when above 1); scale_factor_per_axis (3,) and its sigma: m per gyro axis from the
+    linear step when estimated (per_axis_scale_factor), else NaN; rate_offset_sigma_rad_s (3,): the
+    sigma of a constant rate offset estimated alone from these windows (their noise; NaN without a noise
+    model): the misalignment sigma that a rms rate w perpendicular to an axis would give is about
+    rate_offset_sigma / w, the scale-factor sigma for a spread (std) s of |w| about rate_offset_sigma / s.
     """
 
     q_GS: FloatArray
@@ -231,6 +286,15 @@ class AlignmentEstimate:
     n_samples: int
     residual_rad_s: FloatArray
     linearised: FloatArray
+    observability: Observability
+    scale_factor_observable: NDArray[np.bool_]
+    drift_observable: NDArray[np.bool_]
+    covariance: FloatArray
+    jackknife_cov: FloatArray
+    residual_variance_factor: float
+    scale_factor_per_axis: FloatArray
+    scale_factor_per_axis_sigma: FloatArray
+    rate_offset_sigma_rad_s: FloatArray = field(default_factory=lambda: np.full(3, np.nan))
 
     @property
     def misalignment_sigma_rad(self) -> FloatArray:
@@ -238,24 +302,11 @@ class AlignmentEstimate:
         s = np.sqrt(np.diag(self.misalignment_cov_rad2))
         return np.where(self.observable_axes, s, np.nan)
 
-
-def _normal_blocks(w_a: FloatArray, r: FloatArray, x: FloatArray, sw: FloatArray, window: NDArray[np.intp],
-                   drift_degree: int | None) -> tuple[FloatArray, FloatArray]:
-    """Per-window normal matrices N_w (W, p, p) and right sides v_w (W, p) of the weighted (sw) LSQ of
-    r = dm a - [a x] dtheta + sum_k c_k x^k (the drift polynomial only if drift_degree is not None)."""
-    n = w_a.shape[0]
-    n_drift = 0 if drift_degree is None else drift_degree + 1
-    p = 4 + 3 * n_drift
-    jac = np.zeros((n, 3, p))
-    jac[:, :, 0] = w_a
-    jac[:, :, 1:4] = -rotations.skew(w_a)
-    for k in range(n_drift):
-        jac[:, :, 4 + 3 * k : 7 + 3 * k] = np.eye(3) * (x**k)[:, None, None]
-    nn = np.einsum("n,nki,nkj->nij", sw, jac, jac)
-    vv = np.einsum("n,nki,nk->ni", sw, jac, r)
-    order = np.argsort(window, kind="stable")
-    first = np.flatnonzero(np.diff(window[order], prepend=-1))  # window ids are 0..W-1, all present
-    return np.add.reduceat(nn[order], first, axis=0), np.add.reduceat(vv[order], first, axis=0)
+    @property
+    def complete(self) -> bool:
+        """Every misalignment axis, the scale factor and every drift component determined."""
+        return bool(np.all(self.observable_axes) and np.all(self.scale_factor_observable)
+                    and np.all(self.drift_observable))
 
 
 def _solve_wahba(b: FloatArray, r: FloatArray, w: FloatArray) -> tuple[FloatArray, float]:
@@ -282,6 +333,9 @@ def estimate_alignment(
     drift_degree: int | None = 0,
     min_spread: float = 0.02,
     max_sigma_rad: float = 10.0 * np.pi / 648000.0,
+    noise: RateNoise | None = None,
+    per_axis_scale_factor: bool = False,
+    rank_tolerance: float = RANK_TOLERANCE,
 ) -> AlignmentEstimate:
     """Misalignment (QUEST, 000 eq. 9) and scale-factor error from gyro vs star-tracker rates.
 
@@ -292,32 +346,74 @@ def estimate_alignment(
     estimated residual drift polynomial (None: none).
     q_GS_prior, scale_factor_prior: current calibration (linearisation point of the drift-offset step,
     and the value kept along unobservable directions); q_GS_nominal: the configured mounting.
-    min_spread, max_sigma_rad: observability thresholds (module docstring). Returns
+    min_spread, max_sigma_rad: a misalignment axis is also unobservable when the rate directions' spread
+    about it is below min_spread or its sigma above max_sigma_rad. noise: the star-tracker noise model of
+    the rates (:class:`RateNoise`), which gives the covariance; without it the samples are taken as
+    independent with variances proportional to 1 / sample_weight, scaled by the residual variance.
+    per_axis_scale_factor: the linear step estimates m per gyro axis (reported beside the scalar m of
+    the magnitude ratios). rank_tolerance: processing.gyro_calibration.observability. Returns
     :class:`AlignmentEstimate`.
     """
-    smp = _alignment_samples(t_s, w_G_rad_s, w_A_rad_s, window, sample_weight)
+    smp = _alignment_samples(t_s, w_G_rad_s, w_A_rad_s, window, sample_weight, noise)
     q_prior = rotations.quat_canonical(rotations.quat_normalize(np.asarray(q_GS_prior, dtype=np.float64)))
     q_nom = rotations.quat_canonical(rotations.quat_normalize(np.asarray(q_GS_nominal, dtype=np.float64)))
-    lin = _linear_step(smp, q_prior, float(scale_factor_prior), drift_degree)
+    m0 = float(scale_factor_prior)
+    lin = _linear_step(smp, q_prior, m0, drift_degree, per_axis_scale_factor, rank_tolerance)
     rot = _quest_rotation(smp, lin.g_corr, q_prior)
-    obs = _observability(smp, rot, lin.cov[1:4, 1:4], q_prior, q_nom, min_spread, max_sigma_rad)
+    n_m = 3 if per_axis_scale_factor else 1
+    obs = _observability(smp, rot, lin, n_m, q_prior, q_nom, min_spread, max_sigma_rad)
     # Scale factor: weighted mean of |w^g| / |w^a| - 1 with weights sw |w^a|^2 (000: mean of the m_i).
     g_norm = np.linalg.norm(lin.g_corr, axis=1)
     m_est = float(np.sum(smp.sw * np.sqrt(rot.a_norm2) * g_norm) / rot.total) - 1.0
     residual = rotations.quat_rotate(rotations.quat_conjugate(obs.q_GS), lin.g_corr) / (1.0 + m_est) - smp.a_vec
+    sf_det = lin.observability.determinable[:n_m]
+    var_m = np.diag(lin.cov)[:n_m]
+    if per_axis_scale_factor:
+        # the weighted mean of the per-axis factors is what the magnitude ratio estimates
+        sf_sigma = float(np.sqrt(_per_axis_mean_variance(lin.cov[:3, :3], smp, q_prior))) if np.all(sf_det) else np.nan
+        # the residual divides by the scalar prior: dm_k = (m_k - m0) / (1 + m0)
+        per_axis = np.where(sf_det, m0 + (1.0 + m0) * lin.x[:3], np.nan)
+        per_axis_sigma = np.where(sf_det, (1.0 + m0) * np.sqrt(var_m), np.nan)
+    else:
+        sf_sigma = float(np.sqrt(var_m[0])) if sf_det[0] else np.nan
+        per_axis = per_axis_sigma = np.full(3, np.nan)
     return AlignmentEstimate(
-        q_GS=obs.q_GS, misalignment_rad=obs.theta, scale_factor_error=m_est, misalignment_cov_rad2=lin.cov[1:4, 1:4],
-        scale_factor_sigma=float(np.sqrt(lin.cov[0, 0])), drift_offset=lin.offset,
-        drift_offset_sigma_rad_s=lin.offset_sigma, spread_eigenvalues=obs.spread_eigenvalues,
+        q_GS=obs.q_GS, misalignment_rad=obs.theta, scale_factor_error=m_est,
+        misalignment_cov_rad2=lin.cov[n_m : n_m + 3, n_m : n_m + 3], scale_factor_sigma=sf_sigma,
+        drift_offset=lin.offset, drift_offset_sigma_rad_s=lin.offset_sigma, spread_eigenvalues=obs.spread_eigenvalues,
         spread_axes=obs.spread_axes, observable_axes=obs.observable_axes, solver_disagreement_rad=rot.disagreement,
         n_windows=smp.n_windows, n_samples=int(smp.g.shape[0]), residual_rad_s=residual, linearised=lin.x,
+        observability=lin.observability, scale_factor_observable=np.array([bool(np.all(sf_det))]),
+        drift_observable=lin.observability.flags("drift_") if drift_degree is not None else np.zeros(3, dtype=bool),
+        covariance=lin.cov, jackknife_cov=lin.jackknife_cov, residual_variance_factor=lin.variance_factor,
+        scale_factor_per_axis=per_axis, scale_factor_per_axis_sigma=per_axis_sigma,
+        rate_offset_sigma_rad_s=_rate_offset_sigma(smp, lin.variance_factor),
     )
+
+
+def _rate_offset_sigma(smp: _Samples, factor: float) -> FloatArray:
+    """Sigma (3,) of a constant rate offset estimated alone (weighted mean) from the windows' noise."""
+    if smp.noise is None:
+        return np.full(3, np.nan)
+    eye = np.broadcast_to(np.eye(3), (smp.t.size, 3, 3))
+    meat = noise_meat(eye, smp.sw, smp.noise.gain, smp.wid, smp.noise.sigma_rad)
+    scale = max(1.0, factor) if np.isfinite(factor) else 1.0
+    return np.sqrt(scale * np.diag(meat)) / float(np.sum(smp.sw))
+
+
+def _per_axis_mean_variance(cov_m: FloatArray, smp: _Samples, q_prior: FloatArray) -> float:
+    """Variance of the weighted mean sum_k c_k m_k that the magnitude ratio estimates, c_k ~ sw (R a)_k^2."""
+    a_G = rotations.quat_rotate(q_prior, smp.a_vec)
+    c = np.sum(smp.sw[:, None] * a_G**2, axis=0)
+    c = c / c.sum()
+    return float(c @ cov_m @ c)
 
 
 @dataclass(frozen=True)
 class _Samples:
     """The finite samples: times t (n,), gyro rates g and star-tracker rates a_vec (n, 3), window ids
-    renumbered 0..W-1, weights sw (n,) scaled to a largest of 1, and the number of windows W."""
+    renumbered 0..W-1, weights sw (n,) scaled to a largest of 1, the number of windows W and the
+    noise model (gain (n, width), sigma (3,)) if given."""
 
     t: FloatArray
     g: FloatArray
@@ -325,10 +421,12 @@ class _Samples:
     wid: NDArray[np.intp]
     sw: FloatArray
     n_windows: int
+    noise: RateNoise | None
 
 
 def _alignment_samples(
-    t_s: ArrayLike, w_G_rad_s: ArrayLike, w_A_rad_s: ArrayLike, window: ArrayLike, sample_weight: ArrayLike | None
+    t_s: ArrayLike, w_G_rad_s: ArrayLike, w_A_rad_s: ArrayLike, window: ArrayLike, sample_weight: ArrayLike | None,
+    noise: RateNoise | None,
 ) -> _Samples:
     t = np.asarray(t_s, dtype=np.float64)
     g = np.asarray(w_G_rad_s, dtype=np.float64)
@@ -342,48 +440,104 @@ def _alignment_samples(
     sw = np.ones(t.shape) if sample_weight is None else np.asarray(sample_weight, dtype=np.float64)
     if sw.shape != t.shape or np.any(sw < 0):
         raise AlignmentError(f"sample_weight must be (n,) = {t.shape} and >= 0, got {sw.shape}")
+    if noise is not None and (noise.gain.ndim != 2 or noise.gain.shape[0] != t.size or noise.sigma_rad.shape != (3,)):
+        raise AlignmentError(f"noise.gain must be (n, width) with n = {t.size} and sigma_rad (3,), got "
+                             f"{noise.gain.shape} and {noise.sigma_rad.shape}")
     good = np.all(np.isfinite(g), axis=1) & np.all(np.isfinite(a_vec), axis=1) & np.isfinite(t) & np.isfinite(sw)
     t, g, a_vec, wid, sw = t[good], g[good], a_vec[good], wid[good], sw[good] / np.max(sw[good])
+    if noise is not None:
+        noise = RateNoise(np.asarray(noise.gain, dtype=np.float64)[good], np.asarray(noise.sigma_rad, dtype=np.float64))
     _, wid = np.unique(wid, return_inverse=True)
     n_win = int(wid.max()) + 1 if wid.size else 0
     if n_win < 3:
         raise AlignmentError(f"need at least 3 alignment windows with valid rates, got {n_win}")
-    return _Samples(t, g, a_vec, wid, sw, n_win)
+    return _Samples(t, g, a_vec, wid, sw, n_win, noise)
 
 
 @dataclass(frozen=True)
 class _Linear:
-    """The linear step: x = (dm, dtheta, drift coefficients in S), its jackknife covariance, the residual
-    drift polynomial in G and the sigma of its constant term, and the gyro rates with it removed."""
+    """The linear step: x = (dm, dtheta, drift coefficients in S; 0 for the undeterminable), the
+    information analysis, the covariance of the determinable parameters, the jackknife covariance, the
+    residual variance factor, the residual drift polynomial in G and the sigma of its constant term, and
+    the gyro rates with it removed."""
 
     x: FloatArray
+    observability: Observability
     cov: FloatArray
+    jackknife_cov: FloatArray
+    variance_factor: float
     offset: DriftTrend
     offset_sigma: FloatArray
     g_corr: FloatArray
 
 
-def _linear_step(smp: _Samples, q_prior: FloatArray, m0: float, drift_degree: int | None) -> _Linear:
-    """Residual drift polynomial (and the linearised dm, dtheta), delete-one-window jackknife covariance."""
+def _linear_step(smp: _Samples, q_prior: FloatArray, m0: float, drift_degree: int | None, per_axis: bool,
+                 rank_tolerance: float) -> _Linear:
+    """Residual drift polynomial and the linearised dm, dtheta on the determinable parameters (the others
+    held at the prior), their covariance (observability module) and the delete-one-window jackknife."""
     t, g, a_vec, n_win = smp.t, smp.g, smp.a_vec, smp.n_windows
     q_SG = rotations.quat_conjugate(q_prior)
     t_ref = 0.5 * float(t.min() + t.max())
     scale = max(0.5 * float(t.max() - t.min()), 1.0)
     x_t = (t - t_ref) / scale
     r = rotations.quat_rotate(q_SG, g) / (1.0 + m0) - a_vec
-    big_n, big_v = _normal_blocks(a_vec, r, x_t, smp.sw, smp.wid, drift_degree)
-    n_tot, v_tot = big_n.sum(axis=0), big_v.sum(axis=0)
-    # pseudo-inverses: a rotation about the only rate direction leaves the normal matrix singular
-    x = np.linalg.pinv(n_tot, rcond=1e-12, hermitian=True) @ v_tot
-    loo = (np.linalg.pinv(n_tot[None] - big_n, rcond=1e-12, hermitian=True) @ (v_tot[None] - big_v)[..., None])[..., 0]
-    dev = loo - loo.mean(axis=0)
-    cov = (n_win - 1) / n_win * dev.T @ dev
+    jac, names = parameter_jacobian(a_vec, x_t, q_prior, drift_degree=drift_degree, per_axis_scale_factor=per_axis)
+    p = jac.shape[2]
+    jw = jac * smp.sw[:, None, None]
+    n_tot = jw.reshape(-1, p).T @ jac.reshape(-1, p)
+    v_tot = jw.reshape(-1, p).T @ r.reshape(-1)
+    floor = None
+    if smp.noise is not None:  # what the rate noise alone puts on the diagonal (observability, step 0)
+        floor = noise_floor(names, smp.sw * np.sum(smp.noise.gain**2, axis=1), smp.noise.sigma_rad, q_prior)
+    info = analyse_information(n_tot, names, rank_tolerance=rank_tolerance, noise_floor=floor)
+    det = info.determinable
+    n_plus = truncated_inverse(n_tot, rank_tolerance)
+    x = n_plus @ v_tot
+    post = r - np.einsum("nkp,p->nk", jac, x)
+    n_det = int(np.sum(det))
+    jk = _jackknife(jac, r, smp, n_tot, v_tot, n_win, rank_tolerance)
+    if smp.noise is not None:
+        meat = noise_meat(jac, smp.sw, smp.noise.gain, smp.wid, smp.noise.sigma_rad)
+        expected = float(np.sum(smp.sw[:, None] * np.sum(smp.noise.gain**2, axis=1)[:, None] * smp.noise.sigma_rad**2))
+        expected -= float(np.trace(n_plus @ meat))
+        observed = float(np.sum(smp.sw[:, None] * post**2))
+        factor = observed / expected if expected > 0 else float("nan")
+        model = subspace_covariance(n_tot, meat, rank_tolerance)
+        # cross-check: the jackknife over W windows (~W - 1 degrees of freedom) far above the model means
+        # an error the white-noise model does not have (e.g. correlated star-tracker noise): inflate by it
+        ratio = float(np.nanmax(np.diag(jk)[det] / np.diag(model)[det])) if n_det else 1.0
+        jk_limit = float(chi2_isf(0.001 / max(n_det, 1), n_win - 1)) / (n_win - 1)
+        inflation = max(1.0, factor if np.isfinite(factor) else 1.0, ratio if ratio > jk_limit else 1.0)
+        cov = model * inflation
+    else:  # no noise model: the jackknife (valid whatever the correlation inside a window)
+        factor = float("nan")
+        cov = jk
     n_drift = 0 if drift_degree is None else drift_degree + 1
-    coef_S = x[4:].reshape(n_drift, 3) if n_drift else np.zeros((1, 3))
+    n_m = 3 if per_axis else 1
+    coef_S = x[n_m + 3 :].reshape(n_drift, 3) if n_drift else np.zeros((1, 3))
     coef_G = (1.0 + m0) * rotations.quat_rotate(q_prior, coef_S)
     offset = DriftTrend(coefficients=coef_G, t_ref_s=t_ref, scale_s=scale, span_s=(float(t.min()), float(t.max())))
-    offset_sigma = np.sqrt(np.diag(cov)[4:7]) * (1.0 + m0) if n_drift else np.zeros(3)
-    return _Linear(x, cov, offset, offset_sigma, g - offset(t))
+    if n_drift:
+        dcm = rotations.quat_to_dcm(q_prior)
+        cov_b = cov[n_m + 3 : n_m + 6, n_m + 3 : n_m + 6]
+        offset_sigma = (1.0 + m0) * np.sqrt(np.diag(dcm @ cov_b @ dcm.T))
+    else:
+        offset_sigma = np.zeros(3)
+    return _Linear(x, info, cov, jk, factor, offset, offset_sigma, g - offset(t))
+
+
+def _jackknife(jac: FloatArray, r: FloatArray, smp: _Samples, n_tot: FloatArray, v_tot: FloatArray, n_win: int,
+               rank_tolerance: float) -> FloatArray:
+    """Delete-one-window jackknife covariance (p, p) of the subspace estimate (zero along null directions)."""
+    jw = jac * smp.sw[:, None, None]
+    nn = np.matmul(np.swapaxes(jw, 1, 2), jac)
+    vv = np.matmul(np.swapaxes(jw, 1, 2), r[:, :, None])[:, :, 0]
+    order = np.argsort(smp.wid, kind="stable")
+    first = np.flatnonzero(np.diff(smp.wid[order], prepend=-1))  # window ids are 0..W-1, all present
+    big_n, big_v = np.add.reduceat(nn[order], first, axis=0), np.add.reduceat(vv[order], first, axis=0)
+    loo = (truncated_inverse(n_tot[None] - big_n, rank_tolerance) @ (v_tot[None] - big_v)[..., None])[..., 0]
+    dev = loo - loo.mean(axis=0)
+    return (n_win - 1) / n_win * dev.T @ dev
 
 
 @dataclass(frozen=True)
@@ -425,21 +579,28 @@ class _Observability:
 
 
 def _observability(
-    smp: _Samples, rot: _Rotation, cov_th: FloatArray, q_prior: FloatArray, q_nom: FloatArray, min_spread: float,
-    max_sigma_rad: float,
+    smp: _Samples, rot: _Rotation, lin: _Linear, n_m: int, q_prior: FloatArray, q_nom: FloatArray,
+    min_spread: float, max_sigma_rad: float,
 ) -> _Observability:
-    """Observability of the rotation from the spread of rate directions (module docstring)."""
+    """Misalignment directions held at the prior and the observable axes (module docstring): the
+    rotation directions in the null space of the information matrix or with a rate-direction spread
+    below min_spread are pinned; an axis is observable when the information matrix determines it, no
+    pinned direction has a component above 0.1 along it and its sigma is at most max_sigma_rad."""
     a_unit = smp.a_vec / np.linalg.norm(smp.a_vec, axis=1, keepdims=True)
     spread = (rot.total * np.eye(3) - np.einsum("n,ni,nj->ij", rot.weight, a_unit, a_unit)) / rot.total
     lam, axes = np.linalg.eigh(spread)
-    sig_dir = np.sqrt(np.maximum(np.einsum("ij,ik,kj->j", axes, cov_th, axes), 0.0))
-    unobservable = (lam < min_spread) | (sig_dir > max_sigma_rad)
+    info = lin.observability
+    pinned_dirs = np.concatenate([axes[:, lam < min_spread], info.null_directions(slice(n_m, n_m + 3))], axis=1)
     q_est = rot.q_GS
     theta = rotations.quat_to_rotvec(rotations.quat_multiply(rotations.quat_conjugate(q_nom), q_est))
-    if np.any(unobservable):
+    pinned = np.zeros((3, 0))
+    if pinned_dirs.shape[1]:
+        u, s, _ = np.linalg.svd(pinned_dirs, full_matrices=False)
+        pinned = u[:, s > 0.3]  # unit vectors: a second direction only if it really differs from the first
         theta_prior = rotations.quat_to_rotvec(rotations.quat_multiply(rotations.quat_conjugate(q_nom), q_prior))
-        u = axes[:, unobservable]
-        theta = theta - u @ (u.T @ theta) + u @ (u.T @ theta_prior)
+        theta = theta - pinned @ (pinned.T @ theta) + pinned @ (pinned.T @ theta_prior)
         q_est = rotations.quat_canonical(rotations.quat_multiply(q_nom, rotations.rotvec_to_quat(theta)))
-    observable_axes = ~np.any(np.abs(axes[:, unobservable]) > 0.1, axis=1)
+    sigma = np.sqrt(np.diag(lin.cov[n_m : n_m + 3, n_m : n_m + 3]))
+    observable_axes = (info.determinable[n_m : n_m + 3] & ~np.any(np.abs(pinned) > 0.1, axis=1)
+                       & (np.nan_to_num(sigma, nan=np.inf) <= max_sigma_rad))
     return _Observability(q_est, theta, lam, axes, observable_axes)

@@ -30,6 +30,7 @@ Times are float64 seconds from any epoch (the job converts int64 TAI ns); quater
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -40,6 +41,7 @@ from processing.attitude import rotations
 from processing.gyro_calibration.alignment import (
     AlignmentError,
     AlignmentEstimate,
+    RateNoise,
     WindowRates,
     alignment_windows,
     estimate_alignment,
@@ -54,6 +56,7 @@ from processing.gyro_calibration.drift_observer import (
     run_drift_observer,
     stationary_noise,
 )
+from processing.gyro_calibration.observability import RANK_TOLERANCE
 from processing.gyro_calibration.slews import SlewReport, slew_report
 from processing.signal.gyro_integration import (
     IntervalRotations,
@@ -99,7 +102,10 @@ class CalibrationSettings:
     drift in the alignment; min_spread, max_misalignment_sigma_rad: observability thresholds;
     convergence_tolerance_rad_s: tube for the drift convergence time; window_outlier_factor: windows
     whose polynomial residual exceeds this factor x the median are not used; lag_compensation: advance
-    the drift trends by the observer's ramp lag (processing.gyro_calibration.drift_observer.ramp_lag_s).
+    the drift trends by the observer's ramp lag (processing.gyro_calibration.drift_observer.ramp_lag_s);
+    per_axis_scale_factor: the alignment's linear step also estimates the scale factor per gyro axis;
+    rank_tolerance: relative eigenvalue threshold of the information matrix
+    (processing.gyro_calibration.observability).
     """
 
     t_r_s: float = 200.0
@@ -119,6 +125,8 @@ class CalibrationSettings:
     convergence_tolerance_rad_s: float = 0.01 * RAD_PER_ARCSEC
     window_outlier_factor: float = 1.5
     lag_compensation: bool = True
+    per_axis_scale_factor: bool = False
+    rank_tolerance: float = RANK_TOLERANCE
 
 
 @dataclass(frozen=True)
@@ -129,7 +137,11 @@ class GyroCalibration:
     drift_rad_s (3,): drift at the end of the data (trend of the last window), gyro frame;
     drift_model: whole-span trend; drift_noise_rad_s (3,): std of the corrected observer estimates
     about the model; drift_convergence_s: time from the first star-tracker sample after which every
-    corrected drift estimate stays within the tolerance of the model (NaN if never).
+    corrected drift estimate stays within the tolerance of the model (NaN if never);
+    drift_sigma_rad_s (3,): 1-sigma of drift_rad_s (the end-of-trend functional of the observer's
+    estimates: their correlated noise about the trend, with the correlation time drift_correlation_time_s
+    (3,) from their lag-1 autocorrelation, and the apparent drift that the misalignment and scale-factor
+    errors put into them); NaN where the alignment's information matrix does not determine the drift.
     observer: the last observer run; windows: the star-tracker window rates; rotations: the interval
     rotations of the last run; spline: the two-pass filtered raw gyro data (gyro frame);
     iterations: list of dicts (misalignment_rad, scale_factor_error, change in sigmas) per pass;
@@ -145,6 +157,8 @@ class GyroCalibration:
     drift_model: DriftTrend
     drift_noise_rad_s: FloatArray
     drift_convergence_s: float
+    drift_sigma_rad_s: FloatArray
+    drift_correlation_time_s: FloatArray
     observer: DriftObserverResult
     windows: WindowRates
     rotations: IntervalRotations
@@ -226,7 +240,9 @@ def calibrate_gyro(
     last = passes.last
     return GyroCalibration(
         alignment=last.est, drift_rad_s=drift.end_rad_s, drift_model=last.model, drift_noise_rad_s=drift.noise_rad_s,
-        drift_convergence_s=drift.convergence_s, observer=last.obs, windows=ctx.windows.rates, rotations=last.rot,
+        drift_convergence_s=drift.convergence_s, drift_sigma_rad_s=drift.sigma_rad_s,
+        drift_correlation_time_s=drift.correlation_time_s, observer=last.obs, windows=ctx.windows.rates,
+        rotations=last.rot,
         spline=spline, iterations=list(passes.history), converged=passes.converged, slews=slews,
         st_noise_rad=ctx.windows.st_noise_rad, integration_error_rad=float(np.max(last.rot.error_rad)),
         windows_used=ctx.windows.used, observer_rate_map=last.rate_map, observer_drift_ref_rad_s=last.b_ref,
@@ -251,6 +267,7 @@ class _Windows:
     inv_var: FloatArray
     w_G: FloatArray
     st_noise_rad: FloatArray
+    gain: FloatArray
 
 
 @dataclass(frozen=True)
@@ -299,6 +316,7 @@ def _context(
         rates=windows, used=used, t_s=t_win, w_A=windows.w_A_rad_s[sel], window=windows.window[sel],
         inv_var=1.0 / windows.rate_variance_s2[sel], w_G=spline.rate(t_win),
         st_noise_rad=np.sqrt(np.median(windows.residual_rms_rad[used] ** 2, axis=0)),
+        gain=np.asarray(windows.rate_noise_gain)[sel],
     )
     return _Context(t_st, q_st, q_nom, plan, win, t_o, lag, cfg)
 
@@ -313,7 +331,8 @@ def _align(
         return estimate_alignment(
             win.t_s, w_g, win.w_A, win.window, win.inv_var, q_GS_prior=q_prior, scale_factor_prior=m_prior,
             q_GS_nominal=ctx.q_nom, drift_degree=degree, min_spread=cfg.min_spread,
-            max_sigma_rad=cfg.max_misalignment_sigma_rad,
+            max_sigma_rad=cfg.max_misalignment_sigma_rad, noise=RateNoise(win.gain, win.st_noise_rad),
+            per_axis_scale_factor=cfg.per_axis_scale_factor, rank_tolerance=cfg.rank_tolerance,
         )
     except AlignmentError as exc:
         raise CalibrationError(str(exc)) from exc
@@ -334,6 +353,8 @@ class _Pass:
     usable: NDArray[np.bool_]
     change: float
     record: dict[str, object]
+    q_GS_in: FloatArray
+    m_in: float
 
 
 def _pass(
@@ -346,16 +367,8 @@ def _pass(
     b_ref = est.drift_offset(t_mid) + (model(t_mid) if model is not None else 0.0)
     frac = 0.1 + 0.8 * it / (cfg.max_iterations + 1)
     report(frac, f"pass {it}: integrating the calibrated gyro (eq. 7)")
-    dcm_SG = rotations.quat_to_dcm(rotations.quat_conjugate(q_GS))
-    rot = interval_rotations(ctx.plan, q_GX=q_GS, scale_factor_error=m, drift=b_ref)
-    on = correction_flags(rot.max_rate_rad_s, rot.valid, cfg.rate_threshold_rad_s)
     report(frac + 0.3 / cfg.max_iterations, f"pass {it}: drift observer")
-    rate_map = dcm_SG / (1.0 + m)
-    obs = run_drift_observer(
-        t_st, ctx.q_st, rot.q, rot.rotvec_rad, rot.valid, on, rate_map=rate_map, drift_ref_rad_s=b_ref,
-        t_r_s=cfg.t_r_s, xi=cfg.xi, acquisition=cfg.acquisition, trend_window_s=cfg.trend_window_s,
-        trend_degree=cfg.trend_degree,
-    )
+    rot, rate_map, obs = _observer_run(ctx, q_GS, m, b_ref)
     usable = (obs.mode == MODE_CORRECTED) & obs.stationary
     if np.count_nonzero(usable) < 2:
         raise CalibrationError("the drift observer never reached its stationary gains in a calibration interval")
@@ -363,17 +376,57 @@ def _pass(
     report(frac + 0.6 / cfg.max_iterations, f"pass {it}: alignment and scale factor (QUEST)")
     new = _align(ctx, new_model, q_GS, m, 0)
     d_theta = rotations.quat_to_rotvec(rotations.quat_multiply(rotations.quat_conjugate(q_GS), new.q_GS))
+    # the change of the determined parameters only (the others are held at the prior or not reported)
     sig_th = np.sqrt(np.diag(new.misalignment_cov_rad2))
-    change = max(
-        float(np.max(np.abs(d_theta) / np.maximum(sig_th, 1e-300))),
-        abs(new.scale_factor_error - m) / max(new.scale_factor_sigma, 1e-300),
-    )
+    changes = [0.0, *(np.abs(d_theta) / np.maximum(sig_th, 1e-300))[new.observable_axes].tolist()]
+    if np.all(new.scale_factor_observable):
+        changes.append(abs(new.scale_factor_error - m) / max(new.scale_factor_sigma, 1e-300))
+    change = float(max(changes))
     record: dict[str, object] = {
         "iteration": it, "misalignment_rad": new.misalignment_rad.tolist(),
         "scale_factor_error": new.scale_factor_error,
         "drift_offset_rad_s": new.drift_offset(t_st[-1]).tolist(), "change_sigma": change,
     }
-    return _Pass(new, obs, rot, rate_map, b_ref, new_model, usable, change, record)
+    return _Pass(new, obs, rot, rate_map, b_ref, new_model, usable, change, record, q_GS, m)
+
+
+def _observer_run(ctx: _Context, q_GS: FloatArray, m: float, b_ref: FloatArray,
+                  near: tuple[IntervalRotations, FloatArray, float] | None = None
+                  ) -> tuple[IntervalRotations, FloatArray, DriftObserverResult]:
+    """Eq. 7 integration with a calibration (q_GS, m, reference drift) and the drift observer on it.
+
+    near = (rotations, q_GS0, m0) of a run with the same reference drift and a nearby calibration: the
+    interval rotations are mapped instead of integrated again (the integrand R_SG (w - b) / (1 + m) of the
+    new calibration is the old one turned by the constant R(q_GS0^-1 o q_GS)^T and scaled by
+    (1 + m0) / (1 + m): exact for the turn, to second order in the interval's rotation for the scale)."""
+    cfg = ctx.cfg
+    if near is None:
+        rot = interval_rotations(ctx.plan, q_GX=q_GS, scale_factor_error=m, drift=b_ref)
+    else:
+        rot0, q0, m0 = near
+        turn = rotations.quat_to_dcm(rotations.quat_multiply(rotations.quat_conjugate(q0), q_GS)).T
+        rv = (1.0 + m0) / (1.0 + m) * rot0.rotvec_rad @ turn.T
+        rot = dataclasses.replace(rot0, q=rotations.rotvec_to_quat(rv), rotvec_rad=rv)
+    on = correction_flags(rot.max_rate_rad_s, rot.valid, cfg.rate_threshold_rad_s)
+    rate_map = rotations.quat_to_dcm(rotations.quat_conjugate(q_GS)) / (1.0 + m)
+    obs = run_drift_observer(
+        ctx.t_st, ctx.q_st, rot.q, rot.rotvec_rad, rot.valid, on, rate_map=rate_map, drift_ref_rad_s=b_ref,
+        t_r_s=cfg.t_r_s, xi=cfg.xi, acquisition=cfg.acquisition, trend_window_s=cfg.trend_window_s,
+        trend_degree=cfg.trend_degree,
+    )
+    return rot, rate_map, obs
+
+
+def _end_drift(ctx: _Context, obs: DriftObserverResult) -> tuple[FloatArray, DriftTrend, NDArray[np.bool_]]:
+    """The drift at the end of the data (trend of the usable estimates of the last trend window), that
+    trend and the samples it was fitted to."""
+    cfg, t_st = ctx.cfg, ctx.t_st
+    usable = (obs.mode == MODE_CORRECTED) & obs.stationary
+    last = usable & (t_st >= t_st[-1] - cfg.trend_window_s)
+    if not np.any(last):
+        last = usable
+    trend = fit_drift_trend(t_st[last], obs.drift_rad_s[last], cfg.trend_degree).shifted(ctx.lag)
+    return trend(t_st[-1]), trend, last
 
 
 @dataclass(frozen=True)
@@ -407,15 +460,18 @@ def _iterate(ctx: _Context, est: AlignmentEstimate, report: Callable[[float, str
 @dataclass(frozen=True)
 class _DriftSummary:
     """The drift at the end of the data [rad/s] (trend of the last window), the noise of the corrected
-    estimates about the whole-span model, and the convergence time [s] (NaN if never)."""
+    estimates about the whole-span model, the convergence time [s] (NaN if never), the sigma of the end
+    drift [rad/s] and the correlation time of the estimates [s] (per axis)."""
 
     end_rad_s: FloatArray
     noise_rad_s: FloatArray
     convergence_s: float
+    sigma_rad_s: FloatArray
+    correlation_time_s: FloatArray
 
 
 def _drift_summary(ctx: _Context, passes: _Passes) -> _DriftSummary:
-    """The reported drift, its noise and convergence time from the last observer run."""
+    """The reported drift, its noise, sigma and convergence time from the last observer run."""
     cfg, t_st, p = ctx.cfg, ctx.t_st, passes.last
     obs, usable, model = p.obs, p.usable, p.model
     last = usable & (t_st >= t_st[-1] - cfg.trend_window_s)
@@ -425,7 +481,81 @@ def _drift_summary(ctx: _Context, passes: _Passes) -> _DriftSummary:
     noise = np.std(dev, axis=0) if dev.shape[0] > 1 else np.full(3, np.nan)
     corrected = obs.mode == MODE_CORRECTED
     conv = drift_convergence_time(t_st, obs.drift_rad_s, corrected, model(t_st), cfg.convergence_tolerance_rad_s)
-    return _DriftSummary(end_trend(t_st[-1]), noise, conv)
+    sigma, tau, shift = _end_drift_sigma(ctx, p, last, end_trend)
+    return _DriftSummary(end_trend(t_st[-1]) + shift, noise, conv, sigma, tau)
+
+
+def _end_drift_sigma(ctx: _Context, p: _Pass, last: NDArray[np.bool_], trend: DriftTrend
+                     ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Sigma (3,) of the end-of-data drift trend, the correlation time (3,) of the estimates and the
+    change (3,) of the end drift from the observer's calibration to the final one (G of term ii).
+
+    The trend's end value is a linear functional L of the estimates b_k of the last window (LSQ polynomial
+    of the trend's degree). Two error terms: (i) the estimates' noise about the trend, correlated with
+    rho(dt) = exp(-|dt| / tau), tau from their lag-1 autocorrelation (the observer is a low-pass filter
+    of time constant ~T_r); (ii) the apparent drift of the calibration errors, (1 + m) R(q_GS)
+    (dm w_k - w_k x dtheta) at the samples' rates, through the same L, with the alignment's covariance.
+    NaN when the drift is not determined."""
+    est = p.est
+    t = ctx.t_st[last]
+    if t.size < 3 or not np.all(est.drift_observable):
+        return np.full(3, np.nan), np.full(3, np.nan), np.zeros(3)
+    x = (t - trend.t_ref_s) / trend.scale_s
+    x_end = (ctx.t_st[-1] + ctx.lag - trend.t_ref_s) / trend.scale_s
+    powers = np.arange(trend.degree + 1)
+    func = (x_end**powers) @ np.linalg.pinv(x[:, None] ** powers)  # (n,): end value = func @ b
+    dev = p.obs.drift_rad_s[last] - trend(t - ctx.lag)
+    s2 = np.mean(dev**2, axis=0)
+    rho1 = np.sum(dev[1:] * dev[:-1], axis=0) / np.maximum(np.sum(dev**2, axis=0), 1e-300)
+    t_o = ctx.t_o
+    tau = np.where(rho1 > 0, -t_o / np.log(np.clip(rho1, 1e-12, 1.0 - 1e-12)), 0.0)
+    dt = np.abs(t[:, None] - t[None, :])
+    var_noise = np.array([s2[a] * (func @ np.exp(-dt / max(tau[a], 1e-9 * t_o)) @ func) for a in range(3)])
+    sens, cov = _calibration_sensitivity(ctx, p)
+    var_cal = np.diag(sens @ cov @ sens.T)
+    # (iii) never below the sigma of the constant drift that the window rate comparisons determine on their
+    # own (the alignment's joint drift offset): the observer's estimate also carries errors of the chain
+    # that (i)-(ii) do not model (e.g. slew transients of the integration); on the one-axis arcs of
+    # bench/alignment_observability.py (i)-(ii) alone covered 90-93 % of the drift components within 3 sigma
+    floor = np.nan_to_num(est.drift_offset_sigma_rad_s)
+    # the observer ran with the last-but-one calibration: move the end drift to the final one (linear)
+    d_theta = rotations.quat_to_rotvec(rotations.quat_multiply(rotations.quat_conjugate(p.q_GS_in), est.q_GS))
+    shift = sens @ np.concatenate([[est.scale_factor_error - p.m_in], d_theta])
+    return np.maximum(np.sqrt(var_noise + var_cal), floor), tau, shift
+
+
+SENSITIVITY_STEP_SCALE = 1e-4
+"""Step of the finite differences of :func:`_calibration_sensitivity` in the scale factor; the misalignment
+step is the same number in rad (20"): linear regime of the observer, far above round-off."""
+
+
+def _calibration_sensitivity(ctx: _Context, p: _Pass) -> tuple[FloatArray, FloatArray]:
+    """Variance (3,) of the end drift due to the calibration errors: the observer absorbs the apparent
+    drift (1 + m) R(q_GS) (dm w - w x dtheta) while it corrects, and keeps what it absorbed during a scan
+    through the following holds, so its response is that of the whole chain: G = d(end drift) / d(m,
+    theta) by finite differences of the last observer run (4 more observer runs on mapped interval
+    rotations, :func:`_observer_run`; theta as q_GS o exp(theta)).
+    Returns G (3, 4) and the covariance (4, 4) of (m, theta) on the determinable subspace."""
+    est = p.est
+    n_m = est.covariance.shape[0] - 3 - 3 * (est.drift_offset.degree + 1)
+    if n_m != 1:  # per-axis factors: the chain applies the scalar one; its variance is scale_factor_sigma^2
+        cov = np.zeros((4, 4))
+        cov[0, 0] = est.scale_factor_sigma**2
+        cov[1:, 1:] = est.covariance[n_m : n_m + 3, n_m : n_m + 3]
+    else:
+        cov = est.covariance[:4, :4]
+    base, _, _ = _end_drift(ctx, p.obs)
+    h = SENSITIVITY_STEP_SCALE
+    sens = np.zeros((3, 4))
+    for k in range(4):  # 4 observer runs, each vectorised over the samples
+        q, m = p.q_GS_in, p.m_in
+        if k == 0:
+            m = m + h
+        else:
+            q = rotations.quat_multiply(q, rotations.rotvec_to_quat(h * np.eye(3)[k - 1]))
+        _, _, obs = _observer_run(ctx, q, m, p.b_ref, near=(p.rot, p.q_GS_in, p.m_in))
+        sens[:, k] = (_end_drift(ctx, obs)[0] - base) / h
+    return sens, np.nan_to_num(cov)
 
 
 def _slew_report(ctx: _Context, passes: _Passes, drift_noise_rad_s: FloatArray) -> SlewReport:

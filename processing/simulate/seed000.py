@@ -237,12 +237,17 @@ def plan_maneuvers(
     scan_duration_s: tuple[float, float],
     scan_peak_rate_rad_s: tuple[float, float],
     hold_duration_s: tuple[float, float],
+    maneuver_axis_B: tuple[float, float, float] | None = None,
 ) -> ManeuverPlan:
     """A hold, then slew / hold / scan / hold ... until duration_s (the last segment may run past it).
 
     The first slew has the longest duration and the highest peak rate of the ranges (worst case for
-    the drift prediction); the others are uniform in the ranges, about uniformly random body axes.
+    the drift prediction); the others are uniform in the ranges, about uniformly random body axes, or
+    all about ``maneuver_axis_B`` (in either sense, the random draws unchanged) when it is given.
     """
+    fixed = None if maneuver_axis_B is None else np.asarray(maneuver_axis_B, dtype=float)
+    if fixed is not None:
+        fixed = fixed / np.linalg.norm(fixed)
     kinds, starts, durations, axes, peaks = ["hold"], [0.0], [initial_hold_s], [np.array([1.0, 0.0, 0.0])], [0.0]
     t = initial_hold_s
     first = True
@@ -262,6 +267,8 @@ def plan_maneuvers(
             else:
                 d, w = rng.uniform(d_lo, d_hi), rng.uniform(w_lo, w_hi)
             axis = _unit_vector(rng)
+            if fixed is not None:
+                axis = fixed if axis[0] >= 0 else -fixed
             if d <= 0.0:
                 continue
             kinds.append(kind)
@@ -326,6 +333,7 @@ def simulate_seed000(
     drift_rate_rad_s2: tuple[float, float, float] = (0.0, 0.0, 0.0),
     gyro_noise_std_rad: float = GYRO_NOISE_000_RAD,
     st_noise_std_rad: tuple[float, float, float] = (ST_NOISE_000_RAD,) * 3,
+    maneuver_axis_B: tuple[float, float, float] | None = None,
 ) -> Scenario000:
     """Simulate a 000 agile-satellite segment: star-tracker quaternions and gyro increments with truth.
 
@@ -333,8 +341,10 @@ def simulate_seed000(
     since 1970-01-01T00:00:00 TAI). The gyro period is T_q = 1/128 s; ``st_period_s`` must be a
     multiple of it. ``misalignment_rad`` (rotation vector of q_GS) and ``scale_factor_error`` default
     to values drawn from the seed: each misalignment component +-U(20, 60) arcsec, m = +-U(0.1, 0.5) %.
-    u0_rad = 0 starts at the ascending node (000 counts time from it). The increments end at
-    start + s T_q, s = 1..N (N = duration / T_q); star-tracker samples at start + k T_o, k = 0..K.
+    u0_rad = 0 starts at the ascending node (000 counts time from it). ``maneuver_axis_B``: every slew and
+    scan about this body axis (e.g. (0, 1, 0): pitch only, with the orbital rate a one-axis arc); None:
+    random axes. A nadir-pointing arc at the orbital rate only: ``initial_hold_s`` >= ``duration_s``. The
+    increments end at start + s T_q, s = 1..N (N = duration / T_q); star-tracker samples at start + k T_o, k = 0..K.
     Returns :class:`Scenario000`.
     """
     parameters = {k: v for k, v in locals().items() if k != "parameters"}
@@ -347,7 +357,7 @@ def simulate_seed000(
     plan = plan_maneuvers(
         duration_s, rng_plan, mean_motion=float(mean_motion_rad_s(a_m)), initial_hold_s=initial_hold_s,
         slew_duration_s=slew_duration_s, slew_peak_rate_rad_s=slew_peak_rate_rad_s, scan_duration_s=scan_duration_s,
-        scan_peak_rate_rad_s=scan_peak_rate_rad_s, hold_duration_s=hold_duration_s,
+        scan_peak_rate_rad_s=scan_peak_rate_rad_s, hold_duration_s=hold_duration_s, maneuver_axis_B=maneuver_axis_B,
     )
     start = np.int64(start_tai_ns)
     q_BS = rotations.quat_canonical(Q_BS_000)
@@ -386,6 +396,9 @@ def _check_parameters(p: dict[str, Any]) -> None:
     _check(p["slew_duration_s"][0] > 0 and p["scan_duration_s"][0] > 0, "slew and scan durations must be > 0")
     for name in ("drift_rad_s", "drift_rate_rad_s2", "st_noise_std_rad"):
         _check(np.shape(p[name]) == (3,), f"{name} must have 3 components, got {p[name]!r}")
+    _check(p["maneuver_axis_B"] is None or (np.shape(p["maneuver_axis_B"]) == (3,)
+                                           and float(np.linalg.norm(p["maneuver_axis_B"])) > 0),
+           f"maneuver_axis_B must be a non-zero 3-vector or None, got {p['maneuver_axis_B']!r}")
     _check(p["misalignment_rad"] is None or np.shape(p["misalignment_rad"]) == (3,),
            f"misalignment_rad must have 3 components, got {p['misalignment_rad']!r}")
     _check(p["scale_factor_error"] is None or abs(p["scale_factor_error"]) < 0.1,

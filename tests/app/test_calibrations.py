@@ -38,3 +38,20 @@ def test_calibration_is_stored_and_applied(client):
     assert r.status_code == 422
     done = wait(client, later["id"], timeout_s=240)
     assert any("calibration version 1" in n for n in done["notes"]), done["notes"]
+
+
+@pytest.mark.slow
+def test_no_calibration_version_from_undeterminable_values(client):
+    """Issue 17: a nadir-pointing arc (the orbital rate only) determines neither misalignment nor scale factor
+    nor drift: the job succeeds with nulls and not_observable, and stores no calibration version."""
+    sc = simulate_seed000(start_tai_ns=START, duration_s=600.0, seed=2, initial_hold_s=1e6)
+    client.post("/api/v1/spacecraft", json={"name": "nadir", "config": sc.config})
+    for stream, columns in sc.streams.items():
+        upload_columns(client, "nadir", stream, columns)
+    r = client.post("/api/v1/jobs", json={"type": "alignment_calibration", "spacecraft": "nadir"})
+    job = wait(client, r.json()["id"], timeout_s=240)
+    assert job["status"] == "succeeded", job["error"]
+    res = job["result"]
+    assert res["calibration_complete"] is False and res["scale_factor_error"] is None
+    assert [w["code"] for w in res["warnings"]] == ["not_observable"]
+    assert client.get("/api/v1/spacecraft/nadir/calibrations").json() == []

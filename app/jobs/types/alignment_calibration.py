@@ -10,9 +10,17 @@ Summary (DESIGN.md): ``misalignment_rad`` = rotation vector of the misalignment 
 o q_GS^-1, S^Delta ~ I + [misalignment x]) relative to the configured mounting (identical to rotvec(q_GS)
 when the configuration has the gyro aligned with the star tracker), ``misalignment_quaternion``,
 ``misalignment_sigma_rad``, ``scale_factor_error`` (w_meas = (1 + m) S^Delta w + b), ``drift_rad_s`` (b
-in the gyro frame at the end of the window), ``drift_convergence_s``, ``calibration_windows``; an axis
-whose misalignment the rate directions do not determine is reported as null. ``calibration`` holds the
-calibration version the service should store for the spacecraft's gyro. Figures follow 000 figs. 5-8.
+in the gyro frame at the end of the window) with ``drift_sigma_rad_s``, ``drift_convergence_s``,
+``calibration_windows``. Observability (issue 17; processing.gyro_calibration.observability): the
+information matrix of (scale factor, misalignment, drift) from the rate history decides what is
+determined; an undetermined value is null with ``misalignment_observable[3]``, ``scale_factor_observable``
+(per axis with ``per_axis_scale_factor``), ``drift_observable[3]`` false and a ``not_observable`` warning
+saying which motion would determine it; ``observability`` holds the analysis; ``apparent_drift_rad_s`` is
+the drift that compensates the gyro under the arc's own motion (what a constant-rate arc does
+determine). ``plausibility`` holds the star-tracker-against-gyro check (app.jobs.plausibility), whose
+time offset is copied to ``time_offset_s`` / ``time_offset_sigma_s``. ``calibration`` holds the
+calibration version the service stores for the spacecraft's gyro, only when ``calibration_complete``
+(everything determined and the iteration converged). Figures follow 000 figs. 5-8.
 """
 
 from __future__ import annotations
@@ -25,13 +33,14 @@ from matplotlib.figure import Figure
 from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field, PositiveFloat, model_validator
 
+from app.jobs.plausibility import HeadSamples, check_heads
 from app.jobs.registry import JobType
 from app.reports.headline import Answer
 from processing.attitude import rotations
 from processing.gyro_calibration.calibration import CalibrationSettings, GyroCalibration, calibrate_gyro
 from processing.gyro_calibration.drift_observer import MODE_NAMES, stationary_noise
 from processing.signal.two_pass_filter import increments_from_rates
-from processing.tasks import Progress, TaskError, TaskInputs, TaskResult
+from processing.tasks import Progress, ResultWarning, TaskError, TaskInputs, TaskResult
 from processing.units import ARCSEC_PER_RAD, DEG_PER_RAD, NS_PER_S, RAD_PER_ARCSEC, RAD_PER_DEG
 
 RESIDUAL_TABLE_MAX_ROWS = 30_000
@@ -69,6 +78,11 @@ class Params(BaseModel):
     max_misalignment_sigma_arcsec: PositiveFloat = Field(10.0, description="Misalignment directions with a larger "
                                                          "sigma are unobservable.")
     convergence_tolerance_arcsec_s: PositiveFloat = Field(0.01, description="Tube of the drift convergence time.")
+    per_axis_scale_factor: bool = Field(False, description="Also estimate the scale-factor error per gyro axis (linear "
+                                        "step of the alignment; the chain itself applies the scalar one).")
+    rank_tolerance: float = Field(1e-6, gt=0.0, lt=1.0, description="Eigenvalue of the unit-diagonal information "
+                                  "matrix (relative to the largest) below which a parameter combination is not "
+                                  "determined.")
 
     @model_validator(mode="after")
     def _windows(self) -> Params:
@@ -87,7 +101,8 @@ class Params(BaseModel):
             min_spread=self.min_rate_spread,
             max_misalignment_sigma_rad=self.max_misalignment_sigma_arcsec * RAD_PER_ARCSEC,
             convergence_tolerance_rad_s=self.convergence_tolerance_arcsec_s * RAD_PER_ARCSEC,
-            lag_compensation=self.lag_compensation,
+            lag_compensation=self.lag_compensation, per_axis_scale_factor=self.per_axis_scale_factor,
+            rank_tolerance=self.rank_tolerance,
         )
 
 
@@ -189,7 +204,8 @@ class _Run:
 
     @property
     def complete(self) -> bool:
-        return bool(np.all(self.cal.alignment.observable_axes) and self.cal.converged)
+        """Every parameter determined and the iteration converged: only then a calibration version."""
+        return bool(self.cal.alignment.complete and self.cal.converged)
 
 
 def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
@@ -217,7 +233,17 @@ def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
     done = _Run(cal=cal, params=params, sensor=sensor, source=source, t0=t0, q_BS=q_BS, q_BG=q_BG,
                 q_GS_nom=q_GS_nom, n_gyro=int(g_ns.size), n_st=int(st_ns.size),
                 window_start_tai_ns=inputs.start_tai_ns, window_end_tai_ns=inputs.end_tai_ns)
-    return TaskResult(summary=_summary(done), tables=_tables(cal, done.ns), notes=notes + _notes(done))
+    summary = _summary(done)
+    # mean rates over the increments at their midpoints (what the plausibility check takes)
+    t_mid = g_ns - np.round(0.5 * np.asarray(interval) * NS_PER_S).astype(np.int64)
+    w_mid = incr / np.asarray(interval, dtype=np.float64)[:, None]
+    summary["plausibility"], plausible = check_heads([HeadSamples(sensor, st_ns, q_IS, q_BS)], t_mid, w_mid, q_BG,
+                                                     notes)
+    head = summary["plausibility"].get(sensor, {})
+    summary["time_offset_s"] = head.get("time_offset_s")
+    summary["time_offset_sigma_s"] = head.get("time_offset_sigma_s")
+    warnings = plausible + _observability_warnings(done)
+    return TaskResult(summary=summary, tables=_tables(cal, done.ns), notes=notes + _notes(done), warnings=warnings)
 
 
 def _notes(r: _Run) -> list[str]:
@@ -257,7 +283,10 @@ def _alignment_summary(r: _Run) -> dict[str, Any]:
     observable = est.observable_axes
     mis = np.where(observable, est.misalignment_rad, np.nan)
     sig = est.misalignment_sigma_rad
-    return {
+    sf_ok = bool(np.all(est.scale_factor_observable))
+    m = est.scale_factor_error if sf_ok else float("nan")
+    m_sig = est.scale_factor_sigma if sf_ok else float("nan")
+    out: dict[str, Any] = {
         "misalignment_rad": _floats(mis),
         "misalignment_arcsec": _floats(mis / RAD_PER_ARCSEC),
         "misalignment_sigma_rad": _floats(sig),
@@ -267,21 +296,62 @@ def _alignment_summary(r: _Run) -> dict[str, Any]:
         "q_GS": _floats(est.q_GS),
         "q_GS_nominal": _floats(r.q_GS_nom),
         "rate_spread_eigenvalues": _floats(est.spread_eigenvalues),
-        "scale_factor_error": float(est.scale_factor_error),
-        "scale_factor_error_sigma": float(est.scale_factor_sigma),
-        "scale_factor_error_percent": float(100.0 * est.scale_factor_error),
+        "scale_factor_error": _floats([m])[0],
+        "scale_factor_error_sigma": _floats([m_sig])[0],
+        "scale_factor_error_percent": _floats([100.0 * m])[0],
+        "scale_factor_observable": sf_ok,
     }
+    if r.params.per_axis_scale_factor:
+        per_axis_ok = est.observability.determinable[:3]
+        out["scale_factor_error_per_axis"] = _floats(est.scale_factor_per_axis)
+        out["scale_factor_error_per_axis_sigma"] = _floats(np.where(per_axis_ok, est.scale_factor_per_axis_sigma,
+                                                                    np.nan))
+        out["scale_factor_observable"] = [bool(v) for v in per_axis_ok]
+    out["observability"] = _observability_summary(r)
+    return out
+
+
+def _observability_summary(r: _Run) -> dict[str, Any]:
+    """The information-matrix analysis of the last alignment pass (processing.gyro_calibration.observability)."""
+    est = r.cal.alignment
+    info = est.observability
+    return {
+        "parameters": list(info.names),
+        "determinable": [bool(v) for v in info.determinable],
+        "relative_eigenvalues": _floats(info.eigenvalues),
+        "rank": info.rank,
+        "rank_tolerance": info.rank_tolerance,
+        "null_component": _floats(info.null_component),
+        "variance_inflation": _floats(info.variance_inflation),
+        "correlation": [_floats(row) for row in info.correlation],
+        "residual_variance_factor": _floats([est.residual_variance_factor])[0],
+        "misalignment_sigma_jackknife_arcsec": _floats(_jackknife_misalignment_sigma(est) / RAD_PER_ARCSEC),
+    }
+
+
+def _jackknife_misalignment_sigma(est: Any) -> NDArray[np.float64]:
+    names = est.observability.names
+    idx = [names.index(f"misalignment_{a}") for a in "xyz"]
+    return np.sqrt(np.diag(est.jackknife_cov)[idx])
 
 
 def _drift_summary(r: _Run) -> dict[str, Any]:
     cal = r.cal
     model = cal.drift_model
+    ok = cal.alignment.drift_observable
+    drift = np.where(ok, cal.drift_rad_s, np.nan)
+    sigma = np.where(ok, cal.drift_sigma_rad_s, np.nan)
     return {
-        "drift_rad_s": _floats(cal.drift_rad_s),
-        "drift_arcsec_s": _floats(cal.drift_rad_s / RAD_PER_ARCSEC),
+        "drift_rad_s": _floats(drift),
+        "drift_arcsec_s": _floats(drift / RAD_PER_ARCSEC),
+        "drift_sigma_rad_s": _floats(sigma),
+        "drift_sigma_arcsec_s": _floats(sigma / RAD_PER_ARCSEC),
+        "drift_observable": [bool(v) for v in ok],
+        "apparent_drift_rad_s": _floats(cal.drift_rad_s),
         "drift_frame": "gyro (w_meas = (1 + m) S^Delta w + b)",
         "drift_time_tai_ns": int(r.ns(cal.observer.t_s[-1])),
         "drift_noise_rad_s": _floats(cal.drift_noise_rad_s),
+        "drift_correlation_time_s": _floats(cal.drift_correlation_time_s),
         "drift_convergence_s": float(cal.drift_convergence_s) if np.isfinite(cal.drift_convergence_s) else None,
         "drift_model": {
             "t_ref_tai_ns": int(r.ns(model.t_ref_s)), "scale_s": model.scale_s,
@@ -289,6 +359,69 @@ def _drift_summary(r: _Run) -> dict[str, Any]:
         },
         "alignment_drift_offset_rad_s": _floats(cal.alignment.drift_offset(cal.observer.t_s[-1])),
     }
+
+
+def _observability_warnings(r: _Run) -> list[ResultWarning]:
+    """``not_observable`` naming what the arc does not determine and the motion that would determine it."""
+    from processing.gyro_calibration.observability import motion_summary
+
+    est = r.cal.alignment
+    undet: list[str] = [f"misalignment about {a}" for a, ok in zip("xyz", est.observable_axes, strict=True) if not ok]
+    if not np.all(est.scale_factor_observable):
+        undet.append("the scale factor")
+    undet += [f"drift {a}" for a, ok in zip("xyz", est.drift_observable, strict=True) if not ok]
+    if r.params.per_axis_scale_factor:
+        undet += [f"scale factor {a}" for a, ok in zip("xyz", est.observability.determinable[:3], strict=True)
+                  if not ok]
+    if not undet:
+        return []
+    win = r.cal.windows
+    used = r.cal.windows_used[win.window]
+    motion = motion_summary(win.w_A_rad_s[used], 1.0 / win.rate_variance_s2[used])
+    dcm_BS = rotations.quat_to_dcm(r.q_BS)
+    axes_B = dcm_BS @ motion.axes
+    rms = motion.rms_rate_rad_s / RAD_PER_DEG
+    mean, std = motion.mean_rate_rad_s / RAD_PER_DEG, motion.std_rate_rad_s / RAD_PER_DEG
+
+    def axis(v: NDArray[np.float64]) -> str:
+        return "body (" + ", ".join(f"{c:+.2f}" for c in v) + ")"
+
+    weak = [i for i in range(1, 3) if rms[i] < 0.1 * rms[0]]
+    # rates that would give a 1" misalignment sigma and a 0.005 % scale-factor sigma (000's targets) with
+    # windows like these: sigma_theta ~ sigma_offset / w_perp, sigma_m ~ sigma_offset / std|w|
+    offset = float(np.nanmax(est.rate_offset_sigma_rad_s)) if np.any(np.isfinite(est.rate_offset_sigma_rad_s)) \
+        else float("nan")
+    need_w = max(offset / RAD_PER_ARCSEC / RAD_PER_DEG, 0.05) if np.isfinite(offset) else 0.1
+    need_s = max(offset / 5e-5 / RAD_PER_DEG, 0.01) if np.isfinite(offset) else 0.1
+    advice = []
+    if any(u.startswith("misalignment") for u in undet):
+        if weak:
+            advice.append("rotate also about " + " or ".join(axis(axes_B[:, i]) for i in weak)
+                          + f" at >= {need_w:.2g} deg/s rms in the slow (<= 1 deg/s) windows, as many as here, for a "
+                          f"1 arcsec sigma (the arc turns mainly about {axis(axes_B[:, 0])} at {rms[0]:.3f} deg/s "
+                          "rms; about the others only " + ", ".join(f"{rms[i]:.4f}" for i in range(1, 3)) + " deg/s)")
+        else:
+            advice.append("rotate about more directions (the misalignment about an axis is seen only through rates "
+                          "perpendicular to it)")
+    if any(u.startswith(("the scale factor", "drift", "scale factor")) for u in undet):
+        advice.append(f"vary the rate magnitude and sense (|w| is {mean:.3f} +- {std:.4f} deg/s here; a spread of "
+                      f">= {need_s:.2g} deg/s gives a 0.005 % scale-factor sigma: the scale factor and the drift "
+                      "along the rate axis are separated only by changes of the rate, e.g. scans at 0.3-1 deg/s in "
+                      "both senses about several axes)")
+    message = ("the rate history of the calibration windows does not determine " + ", ".join(undet)
+               + " (reported as null; no calibration version is stored). To determine them: "
+               + "; ".join(advice) + ".")
+    info = est.observability
+    evidence = {
+        "undetermined": undet, "parameters": list(info.names),
+        "relative_eigenvalues": _floats(info.eigenvalues), "rank_tolerance": info.rank_tolerance,
+        "null_component": _floats(info.null_component), "rate_axes_body": [_floats(axes_B[:, i]) for i in range(3)],
+        "rms_rate_deg_s": _floats(rms), "rate_magnitude_deg_s": {"mean": mean, "std": std},
+        "rate_spread_eigenvalues": _floats(est.spread_eigenvalues),
+        "rate_offset_sigma_arcsec_s": _floats(est.rate_offset_sigma_rad_s / RAD_PER_ARCSEC),
+        "rate_needed_deg_s": {"misalignment_1_arcsec": need_w, "scale_factor_0_005_percent_spread": need_s},
+    }
+    return [ResultWarning("not_observable", message, evidence)]
 
 
 def _process_summary(r: _Run) -> dict[str, Any]:
@@ -333,8 +466,9 @@ def _calibration(r: _Run) -> dict[str, Any]:
     return {
         "kind": "gyro", "paper": "000", "star_tracker": r.sensor, "valid_from_tai_ns": int(r.ns(obs.t_s[0])),
         "valid_to_tai_ns": int(r.ns(obs.t_s[-1])), "q_BG": _floats(q_BG_cal), "q_BG_configured": _floats(r.q_BG),
-        "q_GS": _floats(est.q_GS), "scale_factor_error": float(est.scale_factor_error),
-        "drift_rad_s": _floats(r.cal.drift_rad_s), "complete": r.complete,
+        "q_GS": _floats(est.q_GS),
+        "scale_factor_error": float(est.scale_factor_error) if np.all(est.scale_factor_observable) else None,
+        "drift_rad_s": _floats(np.where(est.drift_observable, r.cal.drift_rad_s, np.nan)), "complete": r.complete,
     }
 
 
@@ -423,9 +557,9 @@ def _fig_drift(result: TaskResult) -> Figure:
     for i, a in enumerate("xyz"):
         ax.plot(t, tab[f"drift_{a}_arcsec_s"], color=_COLOURS[i], lw=0.8, label=f"b_{a}")
         ax.plot(t, tab[f"model_{a}_arcsec_s"], color=_COLOURS[i], lw=1.5, ls="--")
-    end = result.summary["drift_arcsec_s"]
-    lo = min(v for v in end if v is not None) - 0.5
-    hi = max(v for v in end if v is not None) + 0.5
+    end = [v / RAD_PER_ARCSEC for v in result.summary["apparent_drift_rad_s"] if v is not None]
+    lo = (min(end) if end else -1.0) - 0.5
+    hi = (max(end) if end else 1.0) + 0.5
     ax.set_ylim(lo, hi)
     ax.set_xlabel("time since the first sample [s]")
     ax.set_ylabel("drift [arcsec/s] (gyro frame)")
@@ -542,12 +676,14 @@ JOB = JobType(
         "Gyro drift, gyro-to-star-tracker misalignment and scale-factor error from flight data (000): two-pass "
         "filtering of the gyro increments, a nonlinear Luenberger drift observer that is switched off during fast "
         "slews (drift predicted from its trend), QUEST alignment and scale factor from gyro vs star-tracker rates in "
-        "12-18 s windows of slow motion, iterated until the change is below noise. Unobservable misalignment axes "
-        "are reported as null."
+        "12-18 s windows of slow motion, iterated until the change is below noise. What the rate history does not "
+        "determine (information matrix of misalignment, scale factor and drift) is reported as null with a "
+        "not_observable warning."
     ),
     headline=(Answer("misalignment_rad", "Gyro-to-star-tracker misalignment (rotation vector of q_GS)",
                      sigma="misalignment_sigma_rad", frame="gyro G relative to star tracker {sensor} (S)"),
               Answer("scale_factor_error", "Gyro scale-factor error m", sigma="scale_factor_error_sigma", unit="ppm",
                      scale=1e6),
-              Answer("drift_rad_s", "Gyro drift b at the end of the window", frame="gyro (G)")),
+              Answer("drift_rad_s", "Gyro drift b at the end of the window", sigma="drift_sigma_rad_s",
+                     frame="gyro (G)")),
 )

@@ -147,8 +147,9 @@ def test_rotation_about_one_axis_is_not_observable():
     assert np.isnan(est.misalignment_sigma_rad[2])
     # the rate axis is mapped like the truth; the turn about it is held at the prior (the nominal mounting),
     # so x and y equal the truth's up to the second-order coupling with its z (~ theta_z theta_xy / 2)
+    # (up to the pull of the pseudo-pairs, REGULARISATION x the offset from the prior ~ 4e-11 rad)
     np.testing.assert_allclose(rotations.quat_rotate(est.q_GS, [0, 0, 1.0]), rotations.quat_rotate(q_GS, [0, 0, 1.0]),
-                               atol=1e-12)
+                               atol=1e-10)
     assert abs(est.misalignment_rad[2]) < 1e-12
     np.testing.assert_allclose(est.misalignment_rad[:2], rotations.quat_to_rotvec(q_GS)[:2], atol=5e-8)
     assert est.scale_factor_error == pytest.approx(0.003, abs=1e-9)
