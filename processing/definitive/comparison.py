@@ -132,14 +132,17 @@ def compare_alignment(result: DefinitiveResult, steps: GyroSteps, heads: list[St
                                       _f(est.misalignment_sigma_rad[i])))
     for i, a in enumerate("xyz"):
         if i in cal_idx:
+            sf_ok = bool(np.all(est.scale_factor_observable))  # undetermined by 000: nothing to compare
             rows.append(ComparisonRow("scale factor error", a, "", _f(result.K[K_ENTRIES[i]]),
-                                      _f(np.sqrt(cov[cal_idx[i], cal_idx[i]])), _f(est.scale_factor_error),
-                                      _f(est.scale_factor_sigma)))
+                                      _f(np.sqrt(cov[cal_idx[i], cal_idx[i]])),
+                                      _f(est.scale_factor_error) if sf_ok else None,
+                                      _f(est.scale_factor_sigma) if sf_ok else None))
     t_last = t0 + int(round(cal.observer.t_s[-1] * NS_PER_S))
     j = min(int(np.searchsorted(result.time_tai_ns, t_last)), result.time_tai_ns.size - 1)
     for i, a in enumerate("xyz"):
         rows.append(ComparisonRow("gyro drift at the end (gyro axes)", a, "rad/s", _f(result.bias_G_rad_s[j, i]),
-                                  _f(result.bias_sigma_G_rad_s[j, i]), _f(cal.drift_rad_s[i]),
-                                  _f(cal.drift_noise_rad_s[i])))
+                                  _f(result.bias_sigma_G_rad_s[j, i]),
+                                  _f(cal.drift_rad_s[i]) if est.drift_observable[i] else None,
+                                  _f(cal.drift_sigma_rad_s[i]) if est.drift_observable[i] else None))
     return {"available": True, "reference_sensor": head.name, "rows": [r.as_dict() for r in rows],
             "converged": bool(cal.converged)}
