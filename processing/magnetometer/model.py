@@ -77,14 +77,14 @@ class MagnetometerErrors:
     def measure(self, B_true_M_nT: ArrayLike, mu_B_A_m2: ArrayLike | None = None) -> NDArray[np.float64]:
         """Noise-free B_meas (N, 3) nT from the true field B_true_M_nT (N, 3) nT and the dipole mu_B_A_m2 (N, 3)."""
         B = np.asarray(B_true_M_nT, dtype=np.float64)
-        out = B @ (np.eye(3) + self.D).T + self.bias_nT
+        out = np.einsum("ij,kj->ki", np.eye(3) + self.D, B) + self.bias_nT  # einsum: no threaded BLAS
         if mu_B_A_m2 is not None:
-            out = out + np.asarray(mu_B_A_m2, dtype=np.float64) @ self.coupling_nT_per_A_m2.T
+            out = out + np.einsum("ij,kj->ki", self.coupling_nT_per_A_m2, np.asarray(mu_B_A_m2, dtype=np.float64))
         return np.asarray(out, dtype=np.float64)
 
     def correct(self, B_meas_M_nT: ArrayLike, mu_B_A_m2: ArrayLike | None = None) -> NDArray[np.float64]:
         """B_true_est = (I + D)^-1 (B_meas - b - C mu_B), (N, 3) nT; mu None: no coupling term."""
         y = np.asarray(B_meas_M_nT, dtype=np.float64) - self.bias_nT
         if mu_B_A_m2 is not None:
-            y = y - np.asarray(mu_B_A_m2, dtype=np.float64) @ self.coupling_nT_per_A_m2.T
-        return np.asarray(np.linalg.solve(np.eye(3) + self.D, y.T).T, dtype=np.float64)
+            y = y - np.einsum("ij,kj->ki", self.coupling_nT_per_A_m2, np.asarray(mu_B_A_m2, dtype=np.float64))
+        return np.asarray(np.einsum("ij,kj->ki", np.linalg.inv(np.eye(3) + self.D), y), dtype=np.float64)
