@@ -81,7 +81,8 @@ def statistics(seeds: int) -> None:
         print(f"  |z| < {k}: {np.mean(np.abs(z) < k):.4f}")
     print(f"  per-parameter z mean {np.array2string(z.mean(axis=0), precision=2)}")
     print(f"  per-parameter z std  {np.array2string(z.std(axis=0), precision=2)}")
-    print(f"false-alarm rate (any warning condition): injected errors {alarms_err}/{seeds}, clean {alarms_clean}/{seeds}")
+    print(f"false-alarm rate (any warning condition): injected errors {alarms_err}/{seeds}, "
+          f"clean {alarms_clean}/{seeds}")
 
 
 def _alarm(c: object) -> bool:
