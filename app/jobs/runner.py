@@ -95,7 +95,8 @@ def load_inputs(session: Session, settings: Settings, job: Job,
         screening_note = [f"only samples accepted by data_screening job {screening_id} were used"]
     if job_type.applies_calibration:
         torquer = streams.get("magnetorquer")
-        if job_type.applies_calibration == "magnetometer" and torquer is None:  # the coupling term needs it
+        pinned = CALIBRATION_PREFIX + job_type.applies_calibration in (job.reference or {})
+        if job_type.applies_calibration == "magnetometer" and pinned and torquer is None:  # for the coupling
             table = read_window(session, store, job.spacecraft_id, STREAMS["magnetorquer"], job.start_tai_ns,
                                 job.end_tai_ns)
             if table.num_rows:

@@ -45,6 +45,7 @@ field along one direction.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -202,7 +203,7 @@ def _residual_and_jacobian(p: NDArray[np.float64], H: NDArray[np.float64], ref: 
     return nx - ref, J, eiv
 
 
-def _apply(A: NDArray[np.float64], v: NDArray[np.float64]) -> NDArray[np.float64]:
+def _apply(A: NDArray[Any], v: NDArray[Any]) -> NDArray[np.float64]:
     """A v for every row v (N, 3) of v: (N, 3); einsum (no threaded BLAS on tall, thin arrays)."""
     return np.asarray(np.einsum("ij,kj->ki", A, v), dtype=np.float64)
 
@@ -397,7 +398,7 @@ def calibrate_magnetometer(
 
     prior_w = 1.0 / _PRIOR_SIGMA[:n_params] ** 2
     N_info = _gram(J) / s2
-    cov = np.linalg.inv(N_info + np.diag(prior_w)) * inflation
+    cov = np.asarray(np.linalg.inv(N_info + np.diag(prior_w)) * inflation, dtype=np.float64)
     sigma = np.sqrt(np.diag(cov))
     tol = st.tolerances(n_params)
     F_t = N_info * np.outer(tol, tol) / inflation
