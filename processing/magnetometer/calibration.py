@@ -213,6 +213,11 @@ def _tmul(J: NDArray[np.float64], r: NDArray[np.float64]) -> NDArray[np.float64]
     return np.asarray(np.einsum("ki,k->i", J, r), dtype=np.float64)
 
 
+def _ss(r: NDArray[np.float64]) -> float:
+    """r^T r by einsum."""
+    return float(np.einsum("k,k->", r, r))
+
+
 def _gram(J: NDArray[np.float64]) -> NDArray[np.float64]:
     """J^T J by einsum: OpenBLAS's threaded gemm is ~100x slower on tall (N, 18) matrices on a busy machine."""
     return np.asarray(np.einsum("ki,kj->ij", J, J), dtype=np.float64)
@@ -272,7 +277,7 @@ def _gauss_newton(p0: NDArray[np.float64], H: NDArray[np.float64], ref: NDArray[
     p = p0.copy()
     r = _residual_only(p, H, ref, mu, 0.0)
     n_dof = max(r.size - p.size, 1)
-    s2 = max(float(r @ r) / n_dof, 1e-12)
+    s2 = max(_ss(r) / n_dof, 1e-12)
 
     def nv() -> float:
         return s2 if noise_var is None else noise_var
@@ -285,16 +290,16 @@ def _gauss_newton(p0: NDArray[np.float64], H: NDArray[np.float64], ref: NDArray[
         N = _gram(J) / s2 + np.diag(prior_w)
         g = (_tmul(J, r) - eiv) / s2 + prior_w * p
         dp = -np.linalg.solve(N, g)
-        c0 = float(r @ r) / s2 + float(np.sum(prior_w * p * p))
+        c0 = _ss(r) / s2 + float(np.sum(prior_w * p * p))
         step = 1.0
         while True:
             p_new = p + step * dp
             r_new = _residual_only(p_new, H, ref, mu, nv())
-            if float(r_new @ r_new) / s2 + float(np.sum(prior_w * p_new * p_new)) <= c0 + 10.0 or step < 1e-3:
+            if _ss(r_new) / s2 + float(np.sum(prior_w * p_new * p_new)) <= c0 + 10.0 or step < 1e-3:
                 break
             step *= 0.5
         p = p_new
-        s2 = max(float(r_new @ r_new) / n_dof, 1e-12)
+        s2 = max(_ss(r_new) / n_dof, 1e-12)
         r, J, eiv = _residual_and_jacobian(p, H, ref, mu, nv())
         sig = np.sqrt(np.diag(np.linalg.inv(N)))
         if np.all(np.abs(step * dp) < 1e-4 * sig):
