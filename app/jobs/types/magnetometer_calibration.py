@@ -222,9 +222,10 @@ def _warnings(cal: Any, params: Params, period: float) -> list[ResultWarning]:
             f"({params.magnetometer_noise_nT} nT, field-model error {params.field_model_error_nT} nT): chi-square "
             f"per dof {ratio:.2f}; the sigmas use the residual variance",
             {"chi2": cal.chi2[0], "dof": cal.chi2[1], "p_value": cal.chi2[2]}))
-    if not cal.converged:
+    if not cal.converged and not bad:
         out.append(ResultWarning("not_observable", f"the fit did not converge in {cal.iterations} iterations "
-                                 "(undetermined directions)", {"iterations": cal.iterations}))
+                                 "(a weakly determined direction): no calibration version",
+                                 {"iterations": cal.iterations}))
     return out
 
 
