@@ -120,14 +120,16 @@ class DaskExecutor(CatalogDispatcher[_InFlight]):
         self._end(job_id, "failed", "the service shut down while the job was running", cancel_task=True)
 
     def capacity(self) -> int:
-        """Jobs kept in flight: the configured maximum, or twice the cluster's worker threads."""
+        """Jobs kept in flight: the configured maximum, or the cluster's worker threads - no more, so that a
+        job claimed (``running`` in the catalog, its timeout counting) starts on a worker at once instead of
+        waiting in the scheduler's queue; the others stay ``queued`` in the catalog."""
         if self._max_in_flight is not None:
             return self._max_in_flight
         try:
             threads = sum(self._client.nthreads().values())
         except Exception:  # noqa: BLE001 - a scheduler hiccup: keep what is in flight
             return len(self._running)
-        return max(self.settings.max_jobs, 2 * threads)
+        return max(1, threads)
 
     def _launch(self, job_id: str) -> None:
         try:

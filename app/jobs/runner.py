@@ -33,7 +33,7 @@ from storage import jobs as jobstore
 from storage.calibrations import add_version
 from storage.db import make_engine, session_factory
 from storage.jobs import ArtifactStore
-from storage.models import Artifact, Calibration, Job, ReferenceDataset, SpacecraftConfig
+from storage.models import Artifact, Calibration, Job, ReferenceDataset, SpacecraftConfig, utcnow
 from storage.parquet_store import ParquetStore
 from storage.reference import ReferenceStore
 from storage.telemetry import read_window
@@ -264,6 +264,9 @@ def _execute(job_id: str, settings: Settings, sessions: sessionmaker[Session], a
             job = session.get(Job, job_id)
             if job is None or job.status != "running":
                 return job.status if job else "missing"
+            # the run starts now, on this worker: its recorded duration excludes the dispatch
+            job.started_at = utcnow()
+            session.commit()
             job_type = registry()[job.type]
             try:
                 params = job_type.params.model_validate(job.params)

@@ -23,8 +23,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.stats import chi2 as chi2_dist
 
+from processing.estimation.chi2 import chi2_sf
 from processing.gyro_calibration.bias_fit import GyroBiasFit, GyroBiasFitError, fit_gyro_bias
 
 __all__ = ["ConstancyTest", "fit_subintervals", "offset_constancy", "subinterval_edges"]
@@ -151,7 +151,7 @@ def offset_constancy(
     q = float(np.einsum("ki,kij,kj->", dev, infos, dev))
     k = len(fits)
     dof = 3 * (k - 1)
-    p_value = float(chi2_dist.sf(q, dof))
+    p_value = float(chi2_sf(q, dof))
     constant = p_value >= alpha
     # per-axis random-effects variance of the offset across the window (DerSimonian-Laird)
     var = np.einsum("kii->ki", covs)

@@ -55,6 +55,7 @@ from processing.attitude.rigid_body import RigidBody004, dcm_BO_columns
 __all__ = [
     "FilterBase",
     "FilterTuning",
+    "ModelErrorStates",
     "GyrolessEKF",
     "UpdateStats",
     "Vector",
@@ -81,6 +82,54 @@ class FilterTuning:
     torque_noise_psd_N2_m2_s: float = (4e-6) ** 2
     disturbance_walk_psd_N2_m2_s: float = (1e-7) ** 2
     attitude_noise_psd_rad2_s: float = (1e-5) ** 2
+
+
+@dataclass(frozen=True)
+class ModelErrorStates:
+    """Model errors the filters carry as extra states, appended after the core state (both filters).
+
+    magnetometer_bias: estimate a constant (or slowly walking) magnetometer bias beta_B [nT] in B
+    (3 states), B_meas = dcm_BO B_O + beta_B + n; bias_sigma_nT its prior 1-sigma per axis,
+    bias_walk_nT_sqrt_s its random walk (0: constant).
+    field_error_sigma_nT > 0: the reference field's error g_O [nT] in O as a first-order Gauss-Markov
+    process (3 states), B_O,true = B_O,model + g_O, g' = -g / field_error_tau_s + white noise, steady
+    1-sigma field_error_sigma_nT per axis (it also absorbs the slow part of scale-factor errors).
+    With either, the field measurement is the predicted unit vector of dcm_BO (B_O + g_O) + beta_B, which
+    needs the reference magnitude |B_O| per step (GyrolessInputs.b_O_norm_nT). The control torque computed
+    from the measured field is corrected by the bias when the dipole is given to ``predict``:
+    tau = mu x (B_meas - beta_B) (its Jacobian -J^-1 [mu x] couples the bias into the rates).
+    """
+
+    magnetometer_bias: bool = False
+    bias_sigma_nT: float = 1000.0
+    bias_walk_nT_sqrt_s: float = 0.0
+    field_error_sigma_nT: float = 0.0
+    field_error_tau_s: float = 1800.0
+
+    def __post_init__(self) -> None:
+        if not (self.bias_sigma_nT > 0 and self.bias_walk_nT_sqrt_s >= 0 and self.field_error_sigma_nT >= 0
+                and self.field_error_tau_s > 0):
+            raise ValueError("ModelErrorStates: bias_sigma_nT and field_error_tau_s must be > 0, the walk and "
+                             f"field_error_sigma_nT >= 0, got {self!r}")
+
+    @property
+    def has_bias(self) -> bool:
+        return bool(self.magnetometer_bias)
+
+    @property
+    def has_field_error(self) -> bool:
+        return self.field_error_sigma_nT > 0
+
+    @property
+    def n_states(self) -> int:
+        return 3 * int(self.has_bias) + 3 * int(self.has_field_error)
+
+    def prior_sigmas(self) -> list[float]:
+        """Initial 1-sigma of the extra states (bias, then field error) [nT]."""
+        return [self.bias_sigma_nT] * (3 * self.has_bias) + [self.field_error_sigma_nT] * (3 * self.has_field_error)
+
+
+NO_MODEL_ERRORS = ModelErrorStates()
 
 
 def _dcm_v_dq(q: tuple[float, float, float, float], v: tuple[float, float, float]) -> list[list[float]]:
@@ -139,8 +188,12 @@ class UpdateStats:
 class FilterBase:
     """Shared state and bookkeeping. Subclasses define the covariance layout."""
 
-    n: ClassVar[int]
+    n_core: ClassVar[int]
     kind: ClassVar[str]
+    n: int
+    """Size of the error state: n_core + the model-error states."""
+    _w_rows: ClassVar[slice]
+    """Rows of the rate error in the error state."""
 
     def __init__(
         self,
@@ -150,7 +203,12 @@ class FilterBase:
         P0: NDArray,
         tuning: FilterTuning = FilterTuning(),
         tau_d_O: ArrayLike = (0.0, 0.0),
+        model_errors: ModelErrorStates = NO_MODEL_ERRORS,
     ) -> None:
+        self.model_errors = model_errors
+        self.na = model_errors.n_states
+        self.n = self.n_core + self.na
+        self.aug: list[float] = [0.0] * self.na
         self.body = RigidBody004.from_inertia(J)
         q = np.asarray(q_OB, dtype=float)
         q = q / np.linalg.norm(q)
@@ -167,13 +225,15 @@ class FilterBase:
         b = self.body
         self._jinv = (1.0 / b.Jx, 1.0 / b.Jy, 1.0 / b.Jz)
         self._I = np.eye(self.n)
+        self._I_core = np.eye(self.n_core)
         self._I4 = np.eye(4)
         self._diag = np.arange(self.n) * (self.n + 1)
         self._q_cache: dict[float, NDArray] = {}
+        self._aug_cache: dict[float, tuple[NDArray, NDArray]] = {}
 
-    # -- state as a 9-vector (w, q, tau) for storage and smoothing ---------------------------------
+    # -- state as a vector (w, q, tau, model errors) for storage and smoothing ---------------------------------
     def state(self) -> NDArray:
-        return np.array(self.w + self.q + self.tau)
+        return np.array(self.w + self.q + self.tau + tuple(self.aug))
 
     def set_state(self, x: ArrayLike) -> None:
         x = np.asarray(x, dtype=float)
@@ -181,6 +241,100 @@ class FilterBase:
         self.w = (float(x[0]), float(x[1]), float(x[2]))
         self.q = (float(q[0]), float(q[1]), float(q[2]), float(q[3]))
         self.tau = (float(x[7]), float(x[8]))
+        self.aug = [float(v) for v in x[9:]]
+
+    def _aug_transition(self, dt: float) -> tuple[NDArray, NDArray]:
+        """Transition factors (na,) and process-noise variances (na,) of the model-error states over dt."""
+        c = self._aug_cache.get(dt)
+        if c is None:
+            me = self.model_errors
+            phi, qv = [], []
+            if me.has_bias:
+                phi += [1.0] * 3
+                qv += [max(me.bias_walk_nT_sqrt_s**2 * dt, 1e-8)] * 3
+            if me.has_field_error:
+                a = math.exp(-dt / me.field_error_tau_s)
+                phi += [a] * 3
+                qv += [max(me.field_error_sigma_nT**2 * (1.0 - a * a), 1e-8)] * 3
+            c = (np.array(phi), np.array(qv))
+            self._aug_cache[dt] = c
+        return c
+
+    def _bias_torque(self, torque_B: Vector, dipole_B: Vector | None) -> tuple[Vector, NDArray | None]:
+        """The known torque corrected by the estimated bias, mu x (B_meas - beta) = torque - mu x beta, and
+        d w' / d beta = -J^-1 [mu x] 1e-9 (beta in nT), or (torque, None) without bias states or dipole."""
+        if dipole_B is None or not self.model_errors.has_bias:
+            return torque_B, None
+        mx, my, mz = float(dipole_B[0]), float(dipole_B[1]), float(dipole_B[2])
+        if mx == 0.0 and my == 0.0 and mz == 0.0:
+            return torque_B, None
+        bx, by, bz = (1e-9 * v for v in self.aug[0:3])
+        tb = (float(torque_B[0]) - (my * bz - mz * by), float(torque_B[1]) - (mz * bx - mx * bz),
+              float(torque_B[2]) - (mx * by - my * bx))
+        ji = np.array(self._jinv)[:, None]
+        C = -1e-9 * ji * np.array([[0.0, -mz, my], [mz, 0.0, -mx], [-my, mx, 0.0]])
+        return tb, C
+
+    def _propagate_covariance(self, Phi_core: NDArray, q_core: NDArray, dt: float,
+                              coupling: NDArray | None = None) -> NDArray:
+        """P <- Phi P Phi^T + Q with the model-error block appended; the model-error means propagated.
+        coupling (3, 3): d w'/d beta (bias into the rates), entered as dt C (and dt^2/2 C into the attitude
+        for the MEKF's second-order Phi). Returns the full Phi (n, n)."""
+        if not self.na:
+            P = Phi_core @ self.P @ Phi_core.T
+            P.flat[self._diag] += q_core
+            self.P = P
+            return Phi_core
+        nc = self.n_core
+        phi, qv = self._aug_transition(dt)
+        Phi = np.zeros((self.n, self.n))
+        Phi[:nc, :nc] = Phi_core
+        Phi[nc:, nc:] = np.diag(phi)
+        if coupling is not None:
+            Phi[self._w_rows, nc:nc + 3] = dt * coupling
+            if self.kind == "mekf":
+                Phi[0:3, nc:nc + 3] = 0.5 * dt * dt * coupling
+        P = Phi @ self.P @ Phi.T
+        P.flat[self._diag] += np.concatenate([q_core, qv])
+        self.P = P
+        self.aug = [a * f for a, f in zip(self.aug, phi.tolist(), strict=True)]
+        return Phi
+
+    def _field_prediction(self, cols: tuple, ref: Vector, norm_nT: float
+                          ) -> tuple[tuple[float, float, float], tuple[float, float, float],
+                                     tuple[float, float, float], float]:
+        """With model-error states: v_O = |B_O| ref + g_O [nT], u = dcm_BO v_O, the predicted unit vector p of
+        u + beta_B and its norm m [nT]."""
+        me, a = self.model_errors, self.aug
+        nb = 3 if me.has_bias else 0
+        v_O = (norm_nT * float(ref[0]), norm_nT * float(ref[1]), norm_nT * float(ref[2]))
+        if me.has_field_error:
+            v_O = (v_O[0] + a[nb], v_O[1] + a[nb + 1], v_O[2] + a[nb + 2])
+        u = rotate_BO(cols, v_O)
+        v = (u[0] + a[0], u[1] + a[1], u[2] + a[2]) if nb else u
+        m = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+        return v_O, u, (v[0] / m, v[1] / m, v[2] / m), m
+
+    def _aug_rows(self, cols: tuple, dirs: Sequence[Sequence[float]], m: float) -> list[list[float]]:
+        """Rows of H for the model-error states of a field measurement whose rows are the directions dirs
+        (d/d beta = dir / m, d/d g_O = dcm_OB dir / m)."""
+        me = self.model_errors
+        c1, c2, c3 = cols
+        out = []
+        for e in dirs:
+            row: list[float] = []
+            if me.has_bias:
+                row += [e[0] / m, e[1] / m, e[2] / m]
+            if me.has_field_error:
+                row += [(c1[0] * e[0] + c1[1] * e[1] + c1[2] * e[2]) / m,
+                        (c2[0] * e[0] + c2[1] * e[1] + c2[2] * e[2]) / m,
+                        (c3[0] * e[0] + c3[1] * e[1] + c3[2] * e[2]) / m]
+            out.append(row)
+        return out
+
+    def _field_rows(self, cols: tuple, meas: Vector, ref: Vector, norm_nT: float
+                    ) -> tuple[list[list[float]], list[float]]:
+        raise NotImplementedError  # pragma: no cover - overridden
 
     def _propagate_state(self, dt: float, w0: float, n2: float, torque_B: Vector) -> None:
         tb = (float(torque_B[0]), float(torque_B[1]), float(torque_B[2]))
@@ -230,11 +384,13 @@ class FilterBase:
         s_B: Vector | None = None,
         s_O: Vector | None = None,
         sigma_s: float = math.nan,
+        b_norm_nT: float = math.nan,
     ) -> UpdateStats:
         """Fuse unit vectors b (field) and s (Sun); either may be None (skipped). 004 eq. (4).
 
-        Each filter gives the rows of H and the residuals of one vector (``_vector_rows``) and applies
-        the correction to its state (``_correct``)."""
+        Each filter gives the rows of H and the residuals of one vector (``_vector_rows``, or
+        ``_field_rows`` for the field with model-error states, which needs the reference magnitude
+        b_norm_nT) and applies the correction to its state (``_correct``)."""
         stats = UpdateStats()
         rows: list[list[float]] = []
         res: list[float] = []
@@ -243,7 +399,14 @@ class FilterBase:
         for meas, ref, sig, tag in ((b_B, b_O, sigma_b, "mag"), (s_B, s_O, sigma_s, "sun")):
             if meas is None or ref is None:
                 continue
-            h, r = self._vector_rows(cols, meas, ref)
+            if self.na and tag == "mag":
+                if not b_norm_nT > 0:
+                    raise ValueError(f"the model-error states need the reference field magnitude, got {b_norm_nT}")
+                h, r = self._field_rows(cols, meas, ref, b_norm_nT)
+            else:
+                h, r = self._vector_rows(cols, meas, ref)
+                if self.na:
+                    h = [row + [0.0] * self.na for row in h]
             rows.extend(h)
             res.extend(r)
             stats.residual_rad[tag == "sun"] = math.sqrt(sum(x * x for x in r))
@@ -278,21 +441,21 @@ class GyrolessEKF(FilterBase):
     ``update(...)`` fuses the field and (optionally) Sun unit vectors, then normalises q.
     """
 
-    n = 9
+    n_core = 9
     kind = "ekf"
+    _w_rows = slice(0, 3)
 
-    def predict(self, dt: float, w0: float, n2: float, torque_B: Vector) -> NDArray:
-        """Propagate over dt [s]; returns the transition matrix Phi (9, 9) used (004: I + F T_s)."""
+    def predict(self, dt: float, w0: float, n2: float, torque_B: Vector, dipole_B: Vector | None = None) -> NDArray:
+        """Propagate over dt [s]; returns the transition matrix Phi (n, n) used (004: I + F T_s). dipole_B
+        [A m^2]: the magnetorquer dipole behind torque_B (used with the bias states)."""
         F = self.jacobian(w0, n2)
         qa = np.array(self.q)
+        torque_B, C = self._bias_torque(torque_B, dipole_B)
         self._propagate_state(dt, w0, n2, torque_B)
-        Phi = self._I + F * dt
-        P = Phi @ self.P @ Phi.T
         # process noise: unmodelled torque on w; attitude white noise dtheta -> dq = 1/2 Xi dtheta with
         # Xi Xi^T = I - q q^T (plus a tiny radial term that keeps P invertible for the smoother); disturbance walk
-        P.flat[self._diag] += self._q_diag(dt)
-        P[3:7, 3:7] -= (0.25 * self.tuning.attitude_noise_psd_rad2_s * dt) * np.outer(qa, qa)
-        self.P = P
+        Phi = self._propagate_covariance(self._I_core + F * dt, self._q_diag(dt), dt, C)
+        self.P[3:7, 3:7] -= (0.25 * self.tuning.attitude_noise_psd_rad2_s * dt) * np.outer(qa, qa)
         return Phi
 
     def _q_diag(self, dt: float) -> NDArray:
@@ -339,12 +502,28 @@ class GyrolessEKF(FilterBase):
         rows = [[*z4, *d, 0.0, 0.0] for d in _dcm_v_dq(self.q, r)]
         return rows, [float(meas[i]) - pred[i] for i in range(3)]
 
+    def _field_rows(self, cols: tuple, meas: Vector, ref: Vector, norm_nT: float
+                    ) -> tuple[list[list[float]], list[float]]:
+        """Three rows of H and the residual of the field with the model-error states: p = unit(v),
+        v = dcm_BO (|B_O| ref + g_O) + beta_B, dp/dv = (I - p p^T) / |v|."""
+        v_O, _, p, m = self._field_prediction(cols, ref, norm_nT)
+        dq = _dcm_v_dq(self.q, v_O)
+        pr = [[(1.0 if i == j else 0.0) - p[i] * p[j] for j in range(3)] for i in range(3)]
+        aug = self._aug_rows(cols, pr, m)
+        rows = []
+        for i in range(3):
+            hq = [(pr[i][0] * dq[0][j] + pr[i][1] * dq[1][j] + pr[i][2] * dq[2][j]) / m for j in range(4)]
+            rows.append([0.0, 0.0, 0.0, *hq, 0.0, 0.0, *aug[i]])
+        return rows, [float(meas[i]) - p[i] for i in range(3)]
+
     def _correct(self, d: list[float]) -> None:
         q0, q1, q2, q3 = (a + b for a, b in zip(self.q, d[3:7], strict=True))
         nn = math.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)  # normalised after the update (004)
         self.q = (q0 / nn, q1 / nn, q2 / nn, q3 / nn)
         self.w = (self.w[0] + d[0], self.w[1] + d[1], self.w[2] + d[2])
         self.tau = (self.tau[0] + d[7], self.tau[1] + d[8])
+        if self.na:
+            self.aug = [a + b for a, b in zip(self.aug, d[9:], strict=True)]
 
     def attitude_cov(self) -> NDArray:
         """Covariance (3, 3) [rad^2] of the attitude error dtheta (in B): 4 Xi^T P_qq Xi."""

@@ -17,12 +17,14 @@ Pipeline (pure, arrays in, dataclass out):
 5. Known torque per step: magnetorquer dipole (zero-order hold of the last command) x measured field.
 6. Initialisation at the first step with both vectors: two-vector (TRIAD) solution, or given angles;
    w_BO = 0. Steps before it are dropped.
-7. Filter (004's EKF or the MEKF), optional RTS smoother (processing.gyroless.rts_smoother); consistency
-   statistics (processing.estimation.consistency).
+7. Filter (004's EKF or the MEKF; optionally with the magnetometer bias and a Gauss-Markov field error as
+   states, processing.gyroless.ekf.ModelErrorStates), optional RTS smoother (processing.gyroless.rts_smoother);
+   consistency statistics (processing.estimation.consistency) and gates (:func:`filter_consistency`).
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -34,21 +36,33 @@ from processing.attitude.rigid_body import q_OB_from_roll_pitch_yaw_004, roll_pi
 from processing.environment.eclipse import sunlit_fraction
 from processing.environment.igrf import igrf_field_E_nT
 from processing.environment.sun import sun_position_I_m
-from processing.estimation.consistency import ChiSquareStats, WhitenessStats, chi_square_stats, whiteness
+from processing.estimation.chi2 import chi2_ppf
+from processing.estimation.consistency import (
+    ChiSquareStats,
+    LjungBoxStats,
+    WhitenessStats,
+    chi_square_stats,
+    ljung_box,
+    whiteness,
+)
 from processing.frames.earth_orientation import EarthOrientation
 from processing.frames.earth_rotation_interp import itrs_to_gcrs_state_interp
 from processing.frames.orbital import dcm_IO_lvlh_004
-from processing.gyroless.ekf import FilterTuning
-from processing.gyroless.filtering import FilterRun, GyrolessInputs, run_filter, triad_q_OB
+from processing.gyroless.ekf import FilterTuning, ModelErrorStates
+from processing.gyroless.filtering import FilterRun, GyrolessInputs, model_error_series, run_filter, triad_q_OB
 from processing.gyroless.rts_smoother import SmoothedRun, rts_smooth
 from processing.units import MU_EARTH_M3_S2, NS_PER_S, RAD_PER_DEG
 
 __all__ = [
+    "FilterConsistency",
     "GyrolessError",
     "GyrolessResult",
     "GyrolessSettings",
     "PreparedInputs",
+    "TUNING_DEFAULT",
+    "TUNING_WITH_MODEL_ERRORS",
     "estimate_gyroless_attitude",
+    "filter_consistency",
     "hermite_state",
     "prepare_gyroless_inputs",
 ]
@@ -59,6 +73,16 @@ class GyrolessError(ValueError):
     """Inputs that do not allow the estimation (too few samples, no overlap, bad mounting, ...)."""
 
 
+TUNING_DEFAULT = FilterTuning()
+"""Process noise without model-error states (the magnetometer pins the attitude; NIS/NEES at their
+expected values on the 004 scenario, tests/processing/gyroless)."""
+TUNING_WITH_MODEL_ERRORS = FilterTuning(torque_noise_psd_N2_m2_s=(1e-5) ** 2)
+"""Process noise with magnetometer-bias or field-error states: the field then determines the attitude less
+(about the orbit normal, where a dawn-dusk Sun adds nothing), the rates and pitch lean on the dynamics, and
+the default unmodelled torque (4e-6 N m sqrt(s)) makes the filter overconfident there (3-sigma coverage of
+the filtered error 0.73-0.78 on clean 004 orbits); 1e-5 N m sqrt(s) gives >= 0.99 (bench/gyroless_ekf.py)."""
+
+
 @dataclass(frozen=True)
 class GyrolessSettings:
     """Settings of the estimation; noise as 1-sigma per axis.
@@ -67,8 +91,12 @@ class GyrolessSettings:
     field_model_error_nT (added in quadrature; IGRF vs the real field, ~50-200 nT in LEO),
     sun_sensor_noise_deg. initial_angles_deg: (roll, pitch, yaw) instead of the two-vector start.
     initial_attitude_sigma_deg, initial_rate_sigma_rad_s, initial_disturbance_sigma_N_m: initial 1-sigma.
-    tuning: process noise. converged_sigma_deg, nis_window_s: convergence criterion (see
+    tuning: process noise; None: :data:`TUNING_DEFAULT`, or :data:`TUNING_WITH_MODEL_ERRORS` when model-error
+    states are estimated (see there). converged_sigma_deg, nis_window_s: convergence criterion (see
     :func:`estimate_gyroless_attitude`). eop: Earth orientation used for ITRF -> GCRS.
+    estimate_magnetometer_bias, magnetometer_bias_sigma_nT: carry the magnetometer bias (in B) as 3 states
+    with this prior 1-sigma; field_error_sigma_nT (> 0 turns it on), field_error_tau_s: the reference
+    field's error in O as a first-order Gauss-Markov process (processing.gyroless.ekf.ModelErrorStates).
     """
 
     filter: Literal["ekf", "mekf"] = "mekf"
@@ -80,10 +108,26 @@ class GyrolessSettings:
     initial_attitude_sigma_deg: float = 10.0
     initial_rate_sigma_rad_s: float = 2e-3
     initial_disturbance_sigma_N_m: float = 1e-5
-    tuning: FilterTuning = field(default_factory=FilterTuning)
+    tuning: FilterTuning | None = None
     converged_sigma_deg: float = 2.0
     nis_window_s: float = 600.0
     eop: EarthOrientation = field(default_factory=EarthOrientation)
+    estimate_magnetometer_bias: bool = False
+    magnetometer_bias_sigma_nT: float = 1000.0
+    field_error_sigma_nT: float = 0.0
+    field_error_tau_s: float = 1800.0
+
+    def resolved_tuning(self) -> FilterTuning:
+        """The process noise used: ``tuning``, else the default for the model-error states chosen."""
+        if self.tuning is not None:
+            return self.tuning
+        return TUNING_WITH_MODEL_ERRORS if self.model_errors().n_states else TUNING_DEFAULT
+
+    def model_errors(self) -> ModelErrorStates:
+        return ModelErrorStates(magnetometer_bias=self.estimate_magnetometer_bias,
+                                bias_sigma_nT=self.magnetometer_bias_sigma_nT,
+                                field_error_sigma_nT=self.field_error_sigma_nT,
+                                field_error_tau_s=self.field_error_tau_s)
 
 
 @dataclass(frozen=True)
@@ -96,7 +140,10 @@ class GyrolessResult:
     filtered: the forward pass (:class:`FilterRun`); smoothed: :class:`SmoothedRun` or None.
     sun_used (K,) bool; sun_in_shadow (K,) bool (a sun sample fell in the shadow and was ignored);
     nis (K,), nis_dof (K,) of the forward pass; nis_stats, whiteness_stats; time_to_converge_s (from
-    the first step) or None; converged; counts: dict of sample counts; notes.
+    the first step) or None; consistency: the gates (:func:`filter_consistency`) over the steps after
+    convergence; converged: a convergence time was found AND the gates pass; model_errors: the
+    model-error states (smoothed when the smoother ran) {"magnetometer_bias_B_nT", "field_error_O_nT":
+    (values (K, 3), 1-sigma (K, 3))} as far as estimated; counts: dict of sample counts; notes.
     """
 
     time_tai_ns: NDArray
@@ -120,6 +167,8 @@ class GyrolessResult:
     whiteness_stats: WhitenessStats
     time_to_converge_s: float | None
     converged: bool
+    consistency: FilterConsistency
+    model_errors: dict[str, tuple[NDArray, NDArray]]
     counts: dict[str, int]
     notes: list[str]
     settings: GyrolessSettings
@@ -169,8 +218,6 @@ def _convergence(t_s: NDArray, sigma_deg: NDArray, nis: NDArray, dof: NDArray, t
                  window_s: float) -> float | None:
     """First time from which, over a window, the mean NIS lies within its 99 % chi^2 interval and the
     largest 1-sigma attitude bound is below threshold_deg. None if never."""
-    from scipy.stats import chi2
-
     ok = np.isfinite(nis) & (dof > 0)
     if not np.any(ok):
         return None
@@ -183,11 +230,100 @@ def _convergence(t_s: NDArray, sigma_deg: NDArray, nis: NDArray, dof: NDArray, t
     cnt = cs_c[j] - cs_c[k]
     tot_d = cs_d[j] - cs_d[k]
     mean = (cs_n[j] - cs_n[k]) / np.maximum(cnt, 1)
-    lo = chi2.ppf(0.005, np.maximum(tot_d, 1)) / np.maximum(cnt, 1)
-    hi = chi2.ppf(0.995, np.maximum(tot_d, 1)) / np.maximum(cnt, 1)
+    lo = chi2_ppf(0.005, np.maximum(tot_d, 1)) / np.maximum(cnt, 1)
+    hi = chi2_ppf(0.995, np.maximum(tot_d, 1)) / np.maximum(cnt, 1)
     good = full & (cnt > 0) & (mean >= lo) & (mean <= hi) & (sigma_deg <= threshold_deg)
     idx = np.flatnonzero(good)
     return float(t_s[idx[0]] - t_s[0]) if idx.size else None
+
+
+NIS_TOLERANCE = 0.1
+"""The mean NIS fails its test when it is outside its 99 % chi^2 interval AND off its degrees of freedom by more
+than this fraction (with thousands of updates the interval alone is ~1 % wide: a slightly wrong noise level
+would flag every arc; a model error that matters moves it by tens of per cent)."""
+NIS_WINDOW_FRACTION_MAX = 0.2
+"""...and the windows (``nis_window_s``, non-overlapping) fail when more than this fraction of them do so."""
+RHO_MAX = 0.1
+"""Whiteness fails when the Ljung-Box test rejects (adjusted p < LJUNG_BOX_P_MIN) AND some autocorrelation of
+the whitened innovations (lags 1..WHITENESS_MAX_LAG) exceeds RHO_MAX in size (the effect size: a correlation
+of 0.1 at lag 1 inflates the variance of a mean by ~20 %; model errors of the magnetometer give 0.3-0.7)."""
+LJUNG_BOX_P_MIN = 1e-3
+WHITENESS_MAX_LAG = 20
+
+
+@dataclass(frozen=True)
+class FilterConsistency:
+    """The consistency gates of a filter pass over the tested segment (from ``start_s``, seconds since the
+    first step: the convergence time, else the end of the first NIS window).
+
+    nis: chi^2 statistics of the NIS over the segment; nis_bounds_99: 99 % interval of its mean (with the
+    summed degrees of freedom); nis_ok: the mean passes (see NIS_TOLERANCE). n_windows, windows_failed:
+    non-overlapping windows of window_s and how many fail the same test; windows_ok. ljung: Ljung-Box
+    test of the whitened innovations; max_abs_rho; whiteness_ok. consistent: all three pass; reasons:
+    what failed, in words."""
+
+    start_s: float
+    nis: ChiSquareStats
+    nis_bounds_99: tuple[float, float]
+    nis_ok: bool
+    window_s: float
+    n_windows: int
+    windows_failed: int
+    windows_ok: bool
+    ljung: LjungBoxStats
+    max_abs_rho: float
+    whiteness_ok: bool
+    consistent: bool
+    reasons: tuple[str, ...]
+
+
+def _nis_mean_fails(nis: NDArray, dof: NDArray) -> tuple[bool, float, float, float, float]:
+    """(fails, mean, mean dof, lo, hi) of the mean of NIS values with their dof against its 99 % interval."""
+    n, tot = nis.size, float(dof.sum())
+    if n == 0:
+        return False, math.nan, math.nan, math.nan, math.nan
+    lo, hi = chi2_ppf(0.005, tot) / n, chi2_ppf(0.995, tot) / n
+    mean, mdof = float(nis.mean()), tot / n
+    return (not lo <= mean <= hi) and abs(mean / mdof - 1.0) > NIS_TOLERANCE, mean, mdof, float(lo), float(hi)
+
+
+def filter_consistency(t_s: NDArray, nis: NDArray, dof: NDArray, whitened: NDArray, start_s: float,
+                       window_s: float) -> FilterConsistency:
+    """NIS (mean over the segment from start_s and over its windows of window_s) and whiteness (Ljung-Box
+    over lags 1..WHITENESS_MAX_LAG) of a filter pass: t_s (K,) [s], nis (K,), dof (K,) (NaN/0 where no
+    update), whitened (K, C) whitened innovation components (NaN padded)."""
+    seg = (t_s - t_s[0] >= start_s) & np.isfinite(nis) & (dof > 0)
+    v, d = nis[seg], dof[seg]
+    fails, mean, mdof, lo, hi = _nis_mean_fails(v, d)
+    st = chi_square_stats(v, d)
+    ts = t_s[seg] - t_s[0] - start_s
+    win = np.floor(ts / window_s).astype(np.int64) if ts.size else np.zeros(0, np.int64)
+    n_win, failed = 0, 0
+    for w in np.unique(win):
+        m = win == w
+        if ts[m].size and ts[m][-1] - ts[m][0] >= 0.5 * window_s:  # full enough windows only
+            n_win += 1
+            failed += int(_nis_mean_fails(v[m], d[m])[0])
+    windows_ok = n_win == 0 or failed <= NIS_WINDOW_FRACTION_MAX * n_win
+    wseg = whitened[(t_s - t_s[0] >= start_s)]
+    lb = ljung_box(wseg, max_lag=WHITENESS_MAX_LAG)
+    wh = whiteness(wseg, max_lag=WHITENESS_MAX_LAG)
+    rho_max = wh.max_abs_rho
+    whiteness_ok = not (np.isfinite(lb.p_min_adjusted) and lb.p_min_adjusted < LJUNG_BOX_P_MIN
+                        and rho_max > RHO_MAX)
+    reasons = []
+    if fails:
+        reasons.append(f"mean NIS {mean:.2f} outside its 99 % interval [{lo:.2f}, {hi:.2f}] for {mdof:.2f} "
+                       "degrees of freedom")
+    if not windows_ok:
+        reasons.append(f"mean NIS outside its 99 % interval in {failed} of {n_win} windows of {window_s:g} s")
+    if not whiteness_ok:
+        reasons.append(f"innovations correlated in time (Ljung-Box p = {lb.p_min_adjusted:.1e}, largest "
+                       f"autocorrelation {rho_max:.2f} > {RHO_MAX:g})")
+    return FilterConsistency(start_s=float(start_s), nis=st, nis_bounds_99=(lo, hi), nis_ok=not fails,
+                             window_s=float(window_s), n_windows=n_win, windows_failed=failed, windows_ok=windows_ok,
+                             ljung=lb, max_abs_rho=rho_max, whiteness_ok=whiteness_ok,
+                             consistent=not reasons, reasons=tuple(reasons))
 
 
 def prepare_gyroless_inputs(
@@ -239,6 +375,8 @@ def prepare_gyroless_inputs(
         t_s=(t[sl] - t[k0]) / NS_PER_S, b_O=b_O_unit[sl], b_B=meas.b_B[sl], sigma_b_rad=meas.sigma_b_rad[sl],
         s_O=orbit.s_O[sl], s_B=meas.s_B[sl], sigma_s_rad=meas.sigma_s_rad[sl], torque_B_N_m=torque.torque_B_N_m[sl],
         w0_rad_s=orbit.w0_rad_s[sl], n2_rad2_s2=orbit.n2_rad2_s2[sl],
+        b_O_norm_nT=np.linalg.norm(orbit.B_O[sl], axis=1),
+        dipole_B_A_m2=None if torque.dipole_B_A_m2 is None else torque.dipole_B_A_m2[sl],
     )
     return PreparedInputs(time_tai_ns=t[sl], inputs=inputs, q0_OB=q0, omega0_BI_B=-orbit.w0_rad_s[k0] * c2,
                           dcm_IO=orbit.dcm_IO[sl], w0_rad_s=orbit.w0_rad_s[sl], sun_in_shadow=meas.in_shadow[sl], k0=k0,
@@ -367,6 +505,7 @@ class _Torque:
 
     torque_B_N_m: NDArray
     notes: tuple[str, ...]
+    dipole_B_A_m2: NDArray | None = None
 
 
 def _control_torque(t: NDArray, B_B_nT: NDArray, torquer_time_tai_ns: ArrayLike | None,
@@ -380,8 +519,10 @@ def _control_torque(t: NDArray, B_B_nT: NDArray, torquer_time_tai_ns: ArrayLike 
     mu = np.asarray(torquer_mu_B_A_m2, dtype=float).reshape(-1, 3)
     i = np.searchsorted(t_tq, t, side="right") - 1
     has = i >= 0
-    torque[has] = np.cross(mu[i[has]], B_B_nT[has] * 1e-9)
-    return _Torque(torque, ())
+    dipole = np.zeros((t.size, 3))
+    dipole[has] = mu[i[has]]
+    torque[has] = np.cross(dipole[has], B_B_nT[has] * 1e-9)
+    return _Torque(torque, (), dipole)
 
 
 def estimate_gyroless_attitude(
@@ -407,7 +548,8 @@ def estimate_gyroless_attitude(
     torquer mu (T, 3) A m^2 in B (optional; without it the control torque is unmodelled);
     q_BM, q_BS mountings (default identity). Times int64 tai_ns, increasing.
     Convergence: first time from which the mean NIS over ``nis_window_s`` is inside its 99 % interval
-    and the largest 1-sigma attitude bound is below ``converged_sigma_deg``.
+    and the largest 1-sigma attitude bound is below ``converged_sigma_deg``; ``converged`` also needs the
+    consistency gates over the steps after it (:func:`filter_consistency`) to pass.
     """
     s = settings
     prep = prepare_gyroless_inputs(
@@ -421,13 +563,15 @@ def estimate_gyroless_attitude(
         run = run_filter(s.filter, inputs, J, q0, prep.omega0_BI_B,
                          attitude_sigma_rad=s.initial_attitude_sigma_deg * RAD_PER_DEG,
                          rate_sigma_rad_s=s.initial_rate_sigma_rad_s,
-                         disturbance_sigma_N_m=s.initial_disturbance_sigma_N_m, tuning=s.tuning)
+                         disturbance_sigma_N_m=s.initial_disturbance_sigma_N_m, tuning=s.resolved_tuning(),
+                         model_errors=s.model_errors())
     except ValueError as exc:
         raise GyrolessError(str(exc)) from exc
     sm = rts_smooth(run) if s.smoother else None
     x = sm.x if sm is not None else run.x_filt
     att_sig = sm.attitude_sigma_rad if sm is not None else run.attitude_sigma_rad
     rate_sig = sm.rate_sigma_rad_s if sm is not None else run.rate_sigma_rad_s
+    me = model_error_series(x, s.filter, sm.P if sm is not None else run.P_filt, s.model_errors())
     q_OB = rotations.quat_canonical(x[:, 3:7])
     w_BI = x[:, 0:3]
     c2_all = rotations.quat_rotate(rotations.quat_conjugate(q_OB), np.array([0.0, 1.0, 0.0]))
@@ -438,6 +582,9 @@ def estimate_gyroless_attitude(
     white = whiteness(run.whitened[:, :4] if s.filter == "mekf" else run.whitened, max_lag=20)
     t_conv = _convergence(inputs.t_s, np.degrees(run.attitude_sigma_rad.max(axis=1)), run.nis, run.nis_dof,
                           s.converged_sigma_deg, s.nis_window_s)
+    start = t_conv if t_conv is not None else min(s.nis_window_s, float(inputs.t_s[-1] - inputs.t_s[0]) / 2)
+    gate = filter_consistency(inputs.t_s, run.nis, run.nis_dof, run.whitened[:, :4] if s.filter == "mekf"
+                              else run.whitened, start, s.nis_window_s)
     counts = {
         "n_steps": int(t.size),
         "n_magnetometer_used": int(np.count_nonzero(run.used_mag)),
@@ -450,5 +597,6 @@ def estimate_gyroless_attitude(
         omega_BI_B=w_BI, omega_BO_B=w_BO, rate_sigma_rad_s=rate_sig, tau_d_O_N_m=x[:, 7:9], q_IB=q_IB,
         filtered=run, smoothed=sm, sun_used=run.used_sun, sun_in_shadow=in_shadow, nis=run.nis,
         nis_dof=run.nis_dof, nis_stats=nis_st, whiteness_stats=white, time_to_converge_s=t_conv,
-        converged=t_conv is not None, counts=counts, notes=notes, settings=s,
+        converged=t_conv is not None and gate.consistent, consistency=gate, model_errors=me,
+        counts=counts, notes=notes, settings=s,
     )

@@ -309,7 +309,7 @@ def _uniform_sums(t: NDArray, c: NDArray, f0: float, df: float, n: int) -> NDArr
     mid = f0 + (n // 2) * df
     strengths = np.ascontiguousarray(c * np.exp(2j * np.pi * mid * t)[None, :], dtype=np.complex128)
     x = np.mod(2.0 * np.pi * df * t + np.pi, 2.0 * np.pi) - np.pi
-    return np.atleast_2d(finufft.nufft1d1(x, strengths, n, eps=NUFFT_EPS, isign=1))
+    return np.atleast_2d(finufft.nufft1d1(x, strengths, n, eps=NUFFT_EPS, isign=1, nthreads=1))
 
 
 def _ls_terms_nufft(t: NDArray, v: NDArray, f0: float, df: float, n: int) -> tuple[NDArray, NDArray, NDArray, NDArray]:

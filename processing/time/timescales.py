@@ -31,7 +31,6 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-import pandas as pd
 from numpy.typing import ArrayLike, NDArray
 
 from processing.time.iso_text import ISO_WIDTH, put_digits, scan_iso
@@ -179,6 +178,15 @@ def _iso_reason(i: int, code: int, raw: NDArray[Any], f: dict[str, NDArray[np.in
     return f"23:59:60 on {int(y[0]):04d}-{int(m[0]):02d}-{int(d[0]):02d} is not a leap second"
 
 
+def _missing(raw: NDArray[Any]) -> NDArray[np.bool_]:
+    """None, NaN, NaT and pandas.NA entries of an object array (pandas' own test, imported only then)."""
+    if all(isinstance(v, str) for v in raw):
+        return np.zeros(raw.size, dtype=bool)
+    import pandas as pd
+
+    return np.asarray(pd.isna(raw), dtype=bool)
+
+
 def iso_to_tai_ns(values: ArrayLike, scale: str = "utc") -> NDArray[np.int64]:
     """Parse ISO 8601 times read on ``scale`` into tai_ns.
 
@@ -201,7 +209,7 @@ def iso_to_tai_ns(values: ArrayLike, scale: str = "utc") -> NDArray[np.int64]:
     shape = raw.shape
     raw = raw.reshape(-1)
     n = raw.size
-    missing = np.zeros(n, dtype=bool) if is_str_array else np.asarray(pd.isna(raw), dtype=bool)
+    missing = np.zeros(n, dtype=bool) if is_str_array else _missing(raw)
     text = raw
     if missing.any():
         text = raw.copy()

@@ -154,6 +154,34 @@ def test_cancel_and_timeout_on_dask(settings, cluster):
         assert job["status"] == "cancelled" and time.monotonic() - t0 < 5
 
 
+@SQLITE_ONLY  # the dispatching does not depend on the catalog's backend
+def test_a_job_is_running_only_while_a_worker_runs_it(settings, cluster):
+    """More jobs than worker threads: the others stay queued in the catalog (not running in Dask's queue), so
+    each recorded duration is the job's own and its timeout does not count the wait."""
+    from datetime import datetime
+
+    cluster[1].wait_for_workers(2, timeout=180)
+    with open_client(dask_settings(settings, cluster)) as client:
+        make_spacecraft(client)
+        ids = [client.post("/api/v1/jobs", json={"type": "executor_check", "spacecraft": "sat1",
+                                                 "params": {"duration_s": 1.5}}).json()["id"] for _ in range(5)]
+        most = 0
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline:
+            states = [client.get(f"/api/v1/jobs/{i}").json()["status"] for i in ids]
+            most = max(most, states.count("running"))
+            if all(st in ("succeeded", "failed") for st in states):
+                break
+            time.sleep(0.05)
+        jobs = [client.get(f"/api/v1/jobs/{i}").json() for i in ids]
+    assert [j["status"] for j in jobs] == ["succeeded"] * 5
+    assert most <= 2  # two worker threads
+    spans = [(datetime.fromisoformat(j["started_at"]), datetime.fromisoformat(j["finished_at"])) for j in jobs]
+    for start, _ in spans:  # the recorded runs overlap no more than the threads allow: no wait counted in
+        assert sum(a <= start < b for a, b in spans) <= 2
+    assert all((b - a).total_seconds() >= 1.5 for a, b in spans)
+
+
 def _partition_sum(part):
     """A module-level partition task (Dask pickles it by reference)."""
     return float(np.sum(part["x"])), os.getpid()

@@ -113,3 +113,49 @@ def test_a_missing_mounting_is_an_error_naming_the_sensor(scenario, sensor, name
     cfg = {k: v for k, v in scenario.config.items() if k != sensor}  # was: axes taken as body axes
     with pytest.raises(TaskError, match=f"{name} is not in the spacecraft configuration .*add {sensor}.q_B"):
         JOB.run(_inputs(scenario, config=cfg), Params(), no_progress)
+
+
+def test_clean_data_raise_no_warning(result) -> None:  # noqa: ANN001
+    assert result.warnings == [] and result.summary["consistency"]["consistent"] is True
+    assert result.summary["magnetometer_bias"] is None and result.summary["field_error_O_nT"] is None
+    assert result.summary["process_noise"]["torque_noise_N_m"] == pytest.approx(4e-6)
+
+
+def _biased(scenario, bias_nT):  # noqa: ANN001, ANN202
+    streams = dict(scenario.streams)
+    mag = dict(streams["magnetometer"])
+    for c, b in zip(("bx", "by", "bz"), bias_nT, strict=True):
+        mag[c] = mag[c] * 1.02 + b
+    streams["magnetometer"] = mag
+    return streams
+
+
+def test_an_uncalibrated_magnetometer_is_flagged(scenario) -> None:  # noqa: ANN001
+    r = JOB.run(_inputs(scenario, streams=_biased(scenario, (300.0, -300.0, 300.0))), Params(), no_progress)
+    s = r.summary
+    assert s["converged"] is False and s["consistency"]["consistent"] is False
+    (w,) = [w for w in r.warnings if w.code == "filter_inconsistent"]
+    assert "estimate_magnetometer_bias" in w.message
+    for key in ("nis_mean", "nis_bounds_99", "ljung_box_p", "max_abs_rho", "windows_failed"):
+        assert key in w.evidence
+    json.dumps(r.summary, allow_nan=False)
+
+
+def test_bias_states_in_the_summary_and_tables(scenario) -> None:  # noqa: ANN001
+    bias = (300.0, -200.0, 250.0)
+    streams = dict(scenario.streams)
+    mag = dict(streams["magnetometer"])
+    for c, b in zip(("bx", "by", "bz"), bias, strict=True):
+        mag[c] = mag[c] + b
+    streams["magnetometer"] = mag
+    r = JOB.run(_inputs(scenario, streams=streams), Params(estimate_magnetometer_bias=True), no_progress)
+    b = r.summary["magnetometer_bias"]
+    assert b["axes"] == ["x_B", "y_B", "z_B"] and len(b["observable"]) == 3
+    for v, sig, obs, truth in zip(b["value_B_nT"], b["sigma_B_nT"], b["observable"], bias, strict=True):
+        assert (v is None) == (not obs)  # q_BM is the identity here: B = M
+        if obs:
+            assert abs(v - truth) < 4 * sig
+    assert ("not_observable" in {w.code for w in r.warnings}) == (not all(b["observable"]))
+    assert r.summary["process_noise"]["torque_noise_N_m"] == pytest.approx(1e-5)  # the default with the states
+    assert "mag_bias_x_nT" in r.tables["attitude"] and "mag_bias_z_sigma_nT" in r.tables["attitude"]
+    json.dumps(r.summary, allow_nan=False)

@@ -9,6 +9,8 @@ attitude/rate and innovation tables, and figures in the spirit of 004 figs. 3-7.
 
 from __future__ import annotations
 
+import math
+from dataclasses import replace
 from typing import Any, Literal
 
 import numpy as np
@@ -20,7 +22,7 @@ from app.reports.headline import Answer
 from processing.gyroless.ekf import FilterTuning
 from processing.gyroless.estimation import GyrolessError, GyrolessResult, GyrolessSettings, estimate_gyroless_attitude
 from processing.star_tracker.orbital_attitude import angle_stats_deg
-from processing.tasks import Progress, TaskError, TaskInputs, TaskResult
+from processing.tasks import Progress, ResultWarning, TaskError, TaskInputs, TaskResult
 from processing.units import DEG_PER_RAD, NS_PER_S
 
 
@@ -32,8 +34,9 @@ class Params(BaseModel):
     field_model_error_nT: float = Field(0.0, ge=0, le=1e5,
                                         description="IGRF model error added in quadrature (crustal/external fields)")
     sun_sensor_noise_deg: float = Field(0.5, gt=0, le=30, description="sun-sensor noise, 1 sigma per axis")
-    torque_noise_N_m: float = Field(4e-6, gt=0, le=1.0,
-                                    description="unmodelled torque, sqrt of its PSD [N m sqrt(s)]")
+    torque_noise_N_m: float | None = Field(
+        None, gt=0, le=1.0, description="unmodelled torque, sqrt of its PSD [N m sqrt(s)]; default 4e-6, or 1e-5 "
+                                        "with model-error states (estimate_magnetometer_bias, field_error_sigma_nT)")
     disturbance_walk_N_m: float = Field(1e-7, ge=0, le=1.0,
                                         description="random walk of the estimated disturbance [N m / sqrt(s)]")
     initial_angles_deg: tuple[float, float, float] | None = Field(
@@ -41,6 +44,12 @@ class Params(BaseModel):
     initial_attitude_sigma_deg: float = Field(10.0, gt=0, le=180)
     initial_rate_sigma_rad_s: float = Field(2e-3, gt=0, le=1.0)
     converged_sigma_deg: float = Field(2.0, gt=0, le=90, description="convergence: 1-sigma attitude bound below this")
+    estimate_magnetometer_bias: bool = Field(False, description="carry the magnetometer bias (body axes) as 3 "
+                                                                "filter states (for an uncalibrated magnetometer)")
+    magnetometer_bias_sigma_nT: float = Field(1000.0, gt=0, le=1e5, description="prior 1-sigma of the bias")
+    field_error_sigma_nT: float = Field(0.0, ge=0, le=1e5, description="reference-field error in the orbital "
+                                        "frame as a first-order Gauss-Markov process, 1-sigma per axis (0: off)")
+    field_error_tau_s: float = Field(1800.0, gt=0, le=1e6, description="its correlation time")
     magnetometer_sensor: str | None = Field(None, description="sensor name; default the only one in the data")
     sun_sensor_name: str | None = Field(None, description="sun-sensor name; default the only one in the data")
 
@@ -105,6 +114,11 @@ def _summary(r: GyrolessResult, params: Params) -> dict[str, Any]:
         "whiteness": {"max_lag": int(wh.rho.shape[1]) if wh.rho.ndim == 2 else 0, "bound": wh.bound,
                       "fraction_outside": wh.fraction_outside, "max_abs_rho": wh.max_abs_rho,
                       "rho": wh.rho},
+        "consistency": _consistency(r),
+        "process_noise": {"torque_noise_N_m": math.sqrt(r.settings.resolved_tuning().torque_noise_psd_N2_m2_s),
+                          "disturbance_walk_N_m": math.sqrt(r.settings.resolved_tuning().disturbance_walk_psd_N2_m2_s)},
+        "magnetometer_bias": _bias(r),
+        "field_error_O_nT": _field_error(r),
         "innovation_rms_deg": {"magnetometer": rms(res[:, 0]), "sun_sensor": rms(res[:, 1])},
         "roll_deg": angle_stats_deg(r.roll_rad),
         "pitch_deg": angle_stats_deg(r.pitch_rad),
@@ -120,7 +134,8 @@ def _summary(r: GyrolessResult, params: Params) -> dict[str, Any]:
         "sun_used_fraction": float(np.mean(r.sun_used)),
         "sun_outages": _intervals(t, outage),
         "counts": r.counts,
-        "artifacts": {"attitude": "attitude series (q_OB, roll/pitch/yaw, 1-sigma, rates, disturbance)",
+        "artifacts": {"attitude": "attitude series (q_OB, roll/pitch/yaw, 1-sigma, rates, disturbance; with the "
+                                  "model-error states mag_bias_{x,y,z}_nT in B and field_error_{x,y,z}_nT in O)",
                       "innovations": "per-step NIS and residual angles"},
     })
 
@@ -142,9 +157,15 @@ def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
         field_model_error_nT=params.field_model_error_nT, sun_sensor_noise_deg=params.sun_sensor_noise_deg,
         initial_angles_deg=params.initial_angles_deg, initial_attitude_sigma_deg=params.initial_attitude_sigma_deg,
         initial_rate_sigma_rad_s=params.initial_rate_sigma_rad_s, converged_sigma_deg=params.converged_sigma_deg,
-        tuning=FilterTuning(torque_noise_psd_N2_m2_s=params.torque_noise_N_m**2,
-                            disturbance_walk_psd_N2_m2_s=params.disturbance_walk_N_m**2),
+        estimate_magnetometer_bias=params.estimate_magnetometer_bias,
+        magnetometer_bias_sigma_nT=params.magnetometer_bias_sigma_nT,
+        field_error_sigma_nT=params.field_error_sigma_nT, field_error_tau_s=params.field_error_tau_s,
     )
+    torque_noise = params.torque_noise_N_m
+    if torque_noise is None:
+        torque_noise = math.sqrt(settings.resolved_tuning().torque_noise_psd_N2_m2_s)
+    settings = replace(settings, tuning=FilterTuning(torque_noise_psd_N2_m2_s=torque_noise**2,
+                                                     disturbance_walk_psd_N2_m2_s=params.disturbance_walk_N_m**2))
     progress(0.2, f"{params.filter} filter" + (" and smoother" if params.smoother else ""))
     try:
         r = estimate_gyroless_attitude(
@@ -158,7 +179,66 @@ def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
     except (GyrolessError, ValueError) as exc:
         raise TaskError(str(exc)) from exc
     progress(0.9, "summary and tables")
-    return TaskResult(summary=_summary(r, params), tables=_tables(r), notes=list(r.notes))
+    return TaskResult(summary=_summary(r, params), tables=_tables(r), notes=list(r.notes), warnings=_warnings(r))
+
+
+BIAS_OBSERVABLE_RATIO = 0.5
+"""A bias component is determined when its posterior 1-sigma is below this fraction of the prior."""
+
+
+def _bias(r: GyrolessResult) -> dict[str, Any] | None:
+    """Magnetometer bias in B (the arc's estimate: smoothed at the first step, else filtered at the last)."""
+    if "magnetometer_bias_B_nT" not in r.model_errors:
+        return None
+    v, sig = r.model_errors["magnetometer_bias_B_nT"]
+    k = 0 if r.smoothed is not None else -1
+    obs = sig[k] < BIAS_OBSERVABLE_RATIO * r.settings.magnetometer_bias_sigma_nT
+    return {"value_B_nT": [float(x) if o else None for x, o in zip(v[k], obs, strict=True)],
+            "sigma_B_nT": [float(x) if o else None for x, o in zip(sig[k], obs, strict=True)],
+            "observable": [bool(o) for o in obs], "prior_sigma_nT": r.settings.magnetometer_bias_sigma_nT,
+            "axes": ["x_B", "y_B", "z_B"]}
+
+
+def _warnings(r: GyrolessResult) -> list[ResultWarning]:
+    """filter_inconsistent when the consistency gates fail (processing.gyroless.estimation.filter_consistency);
+    not_observable for bias components the arc does not determine."""
+    out = []
+    b = _bias(r)
+    if b is not None and not all(b["observable"]):
+        axes = [a for a, o in zip(b["axes"], b["observable"], strict=True) if not o]
+        out.append(ResultWarning("not_observable", f"the arc does not determine the magnetometer bias along "
+                                 f"{', '.join(axes)} (posterior sigma above {BIAS_OBSERVABLE_RATIO:g} of the prior): "
+                                 "reported as null", {"axes": axes, "prior_sigma_nT": b["prior_sigma_nT"]}))
+    g = r.consistency
+    if g.consistent:
+        return out
+    return [*out, ResultWarning(
+        "filter_inconsistent",
+        "the magnetometer/sun-sensor innovations disagree with the filter's covariance ("
+        + "; ".join(g.reasons) + "): the attitude sigma does not cover the error. Calibrate the magnetometer "
+        "(magnetometer_calibration), estimate its bias (estimate_magnetometer_bias) or model the field error "
+        "(field_error_sigma_nT, field_error_tau_s)",
+        _consistency(r))]
+
+
+def _field_error(r: GyrolessResult) -> dict[str, Any] | None:
+    if "field_error_O_nT" not in r.model_errors:
+        return None
+    v, sig = r.model_errors["field_error_O_nT"]
+    return {"rms": np.sqrt(np.mean(v**2, axis=0)).tolist(), "sigma_median": np.median(sig, axis=0).tolist(),
+            "sigma_nT": r.settings.field_error_sigma_nT, "tau_s": r.settings.field_error_tau_s,
+            "axes": ["x_O", "y_O", "z_O"]}
+
+
+def _consistency(r: GyrolessResult) -> dict[str, Any]:
+    g = r.consistency
+    return _clean({
+        "tested_from_s": g.start_s, "nis_mean": g.nis.mean, "nis_dof": g.nis.mean_dof,
+        "nis_bounds_99": list(g.nis_bounds_99), "nis_ok": g.nis_ok, "window_s": g.window_s,
+        "n_windows": g.n_windows, "windows_failed": g.windows_failed, "windows_ok": g.windows_ok,
+        "ljung_box_p": g.ljung.p_min_adjusted, "ljung_box_max_lag": g.ljung.max_lag, "max_abs_rho": g.max_abs_rho,
+        "whiteness_ok": g.whiteness_ok, "consistent": g.consistent,
+    })
 
 
 def _tables(r: GyrolessResult) -> dict[str, dict[str, np.ndarray]]:
@@ -176,6 +256,11 @@ def _tables(r: GyrolessResult) -> dict[str, dict[str, np.ndarray]]:
         **{f"q_ib_{i}": r.q_IB[:, i] for i in range(4)},
         "sun_used": r.sun_used.astype(bool),
     }
+    for name, (v, sig) in r.model_errors.items():
+        base = {"magnetometer_bias_B_nT": "mag_bias", "field_error_O_nT": "field_error"}[name]
+        for i, a in enumerate("xyz"):
+            att[f"{base}_{a}_nT"] = v[:, i]
+            att[f"{base}_{a}_sigma_nT"] = sig[:, i]
     if r.smoothed is not None:
         from processing.attitude.rigid_body import roll_pitch_yaw_004
 
@@ -267,12 +352,12 @@ def _fig_consistency(result: TaskResult) -> Figure:
     ok = np.isfinite(nis)
     ax1.plot(ts[ok], nis[ok], ".", ms=1.5, color="0.5", label="NIS")
     if np.any(ok):
-        from scipy.stats import chi2
+        from processing.estimation.chi2 import chi2_ppf
 
         win = max(1, int(round(300 / max(result.summary.get("step_s") or 1.0, 1e-9))))
         kern = np.ones(win) / win
         ax1.plot(ts[ok], np.convolve(nis[ok], kern, mode="same"), color="tab:blue", label=f"mean over {win} steps")
-        ax1.plot(ts[ok], chi2.ppf(0.975, dof[ok]), color="tab:red", lw=0.8, label="95 % per step")
+        ax1.plot(ts[ok], chi2_ppf(0.975, dof[ok]), color="tab:red", lw=0.8, label="95 % per step")
         ax1.plot(ts[ok], dof[ok], color="k", lw=0.8, label="dof")
     ax1.set_ylabel("NIS")
     ax1.set_xlabel("time since start [s]")

@@ -208,3 +208,38 @@ def test_is_uniform_tolerates_nanosecond_rounding_only():
     t_jitter[10] += 1e-6
     assert not is_uniform(t_jitter)
     assert not is_uniform(np.delete(t, 50))
+
+
+def test_gram_route_matches_the_dense_gram_and_falls_back_to_qr() -> None:
+    """The general route's Gram matrix (NUFFT sums, Toeplitz minus Hankel) equals A^T W A of the dense design,
+    its Cholesky factor gives QR's R, and an ill-conditioned design takes the Householder QR route."""
+    import scipy.linalg
+
+    from processing.signal import sine_series as ss
+
+    rng = np.random.default_rng(5)
+    tau = np.sort(rng.uniform(0.0, 1.0, 900))
+    w = rng.uniform(0.5, 2.0, tau.size)
+    a = ss.sine_series_design(tau, 120, 0.0, 1.0)
+    dense = (a * w[:, None]).T @ a
+    np.testing.assert_allclose(ss._gram_nufft(tau, w, 120), dense, rtol=0, atol=1e-11 * np.abs(dense).max())
+    q, r = ss._gram_factor(a * np.sqrt(w)[:, None], tau, w)
+    r_qr = scipy.linalg.qr(a * np.sqrt(w)[:, None], mode="r")[0][:122]
+    assert q is None and np.allclose(np.abs(r), np.abs(r_qr), atol=1e-9 * np.abs(r_qr).max())
+    gap = np.concatenate([tau[tau < 0.3], tau[tau > 0.7]])  # a wide gap: high harmonics barely determined
+    q_gap, _ = ss._gram_factor(ss.sine_series_design(gap, 200, 0.0, 1.0), gap, None)
+    assert q_gap is not None
+    y = np.sin(7 * tau) + rng.normal(0, 0.01, tau.size)
+    solver = ss.SineSeriesSolver(tau, 120, weights=w)
+    a = ss.sine_series_design(solver.tau, 120, 0.0, 1.0)  # the solver's tau runs from its first to last sample
+    ref = np.linalg.lstsq(a * np.sqrt(w)[:, None], y * np.sqrt(w), rcond=None)[0]
+    np.testing.assert_allclose(solver.fit(y, 120).fitted, a @ ref, atol=1e-10)
+
+
+def test_sine_design_recurrence_matches_numpy() -> None:
+    from processing.signal.sine_series import sine_series_design
+
+    tau = np.concatenate([[0.0, 1e-9], np.sort(np.random.default_rng(1).uniform(0, 1, 500)), [1 - 1e-9, 1.0]])
+    for m in (0, 1, 2, 3, 64, 65, 66, 400):
+        ref = np.column_stack([np.ones_like(tau), tau, np.sin(np.pi * tau[:, None] * np.arange(1, m + 1))])
+        np.testing.assert_allclose(sine_series_design(tau, m, 0.0, 1.0), ref, rtol=0, atol=1e-11)
