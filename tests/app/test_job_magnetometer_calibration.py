@@ -152,3 +152,31 @@ def test_calibration_version_is_stored_and_applied_by_the_runner(client) -> None
     done = wait(client, later["id"], timeout_s=240)
     assert done["status"] == "succeeded", done["error"]
     assert any("magnetometer data corrected with calibration version 1" in n for n in done["notes"]), done["notes"]
+
+
+def test_runner_correction_with_coupling_uses_the_latest_dipole() -> None:
+    """apply_magnetometer_calibration: the dipole of the latest magnetorquer sample at or before each sample;
+    only the calibrated sensor is corrected; without a recent dipole the samples are dropped and it says so."""
+    from processing.magnetometer.model import MagnetometerErrors
+
+    e = MagnetometerErrors.from_components([100.0, -50.0, 20.0], [0.01, 0.0, -0.01], [0.002, 0.0, 0.0], COUPLING)
+    rng = np.random.default_rng(1)
+    t = np.arange(40, dtype=np.int64) * 1_000_000_000
+    B_true = rng.normal(size=(40, 3)) * 3e4
+    t_tq = t[::4] - 500_000_000  # a dipole every 4 s, half a second before a magnetometer sample
+    mu = rng.normal(size=(t_tq.size, 3))
+    held = mu[np.searchsorted(t_tq, t, side="right") - 1]
+    H = e.measure(B_true, held)
+    sensor = np.array(["mag1"] * 20 + ["mag2"] * 20, dtype=object)
+    streams = {"magnetometer": {"time_tai_ns": t, "sensor": sensor, "bx": H[:, 0], "by": H[:, 1], "bz": H[:, 2]}}
+    torquer = {"time_tai_ns": t_tq, "sensor": np.full(t_tq.size, "mtq", dtype=object), "mx": mu[:, 0], "my": mu[:, 1],
+               "mz": mu[:, 2]}
+    values = {"sensor": "mag1", "bias_nT": e.bias_nT.tolist(), "D": e.D.tolist(), "coupling_nT_per_A_m2": COUPLING}
+    out, notes = apply_magnetometer_calibration(streams, values, torquer)
+    m = out["magnetometer"]
+    b = np.column_stack([m["bx"], m["by"], m["bz"]])
+    assert np.allclose(b[:20], B_true[:20], rtol=0, atol=1e-6)  # mag1 corrected
+    assert np.array_equal(b[20:], H[20:])  # mag2 untouched
+    assert "coupling" in notes[0] and len(notes) == 1
+    out, notes = apply_magnetometer_calibration(streams, values, None)
+    assert len(out["magnetometer"]["time_tai_ns"]) == 20 and "dropped" in notes[1]
