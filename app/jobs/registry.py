@@ -35,7 +35,7 @@ class JobType:
     description: str = ""
     reference: tuple[str, ...] = ()  # reference kinds the task can use (each optional)
     produces_calibration: str | None = None  # on success with summary["calibration_complete"]: a new version
-    applies_calibration: str | None = None  # the runner applies the pinned version to the inputs ("gyro")
+    applies_calibration: str | None = None  # the runner applies the pinned version ("gyro", "magnetometer")
     # extra report sections (app.reports.sections: ReportContext -> sequence of ReportSection)
     report_sections: Callable[[Any], Sequence[Any]] | None = None
     # the summary keys that answer the job's question, shown first in its report (app.reports.headline);
@@ -45,7 +45,7 @@ class JobType:
 
 _MODULES = ("coverage", "executor_check", "star_tracker_accuracy", "gyro_bias_fit", "orbital_attitude", "gyroless_ekf",
             "alignment_calibration", "data_screening", "vector_attitude", "reconstruction", "definitive_attitude",
-            "gyro_noise")
+            "gyro_noise", "magnetometer_calibration")
 
 
 def registry() -> dict[str, JobType]:

@@ -94,8 +94,15 @@ def load_inputs(session: Session, settings: Settings, job: Job,
         streams = _apply_screening(session, settings, screening_id, streams)
         screening_note = [f"only samples accepted by data_screening job {screening_id} were used"]
     if job_type.applies_calibration:
+        torquer = streams.get("magnetorquer")
+        pinned = CALIBRATION_PREFIX + job_type.applies_calibration in (job.reference or {})
+        if job_type.applies_calibration == "magnetometer" and pinned and torquer is None:  # for the coupling
+            table = read_window(session, store, job.spacecraft_id, STREAMS["magnetorquer"], job.start_tai_ns,
+                                job.end_tai_ns)
+            if table.num_rows:
+                torquer = {c: table.column(c).to_numpy(zero_copy_only=False) for c in table.column_names}
         streams, spacecraft, notes = _apply_calibration(session, job, job_type.applies_calibration, streams,
-                                                        spacecraft)
+                                                        spacecraft, torquer)
     else:
         notes = []
     notes = screening_note + notes
@@ -130,17 +137,24 @@ def _apply_screening(session: Session, settings: Settings, screening_job_id: str
 
 
 def _apply_calibration(session: Session, job: Job, kind: str, streams: dict[str, dict[str, np.ndarray]],
-                       spacecraft: Spacecraft) -> tuple[dict[str, dict[str, np.ndarray]], Spacecraft, list[str]]:
-    """Apply the calibration version pinned at submission to the gyro streams (000, eq. 2).
+                       spacecraft: Spacecraft, torquer: dict[str, np.ndarray] | None = None,
+                       ) -> tuple[dict[str, dict[str, np.ndarray]], Spacecraft, list[str]]:
+    """Apply the calibration version pinned at submission to the gyro streams (000, eq. 2), or to the
+    magnetometer stream (kind "magnetometer": :func:`apply_magnetometer_calibration`; ``torquer`` the
+    magnetorquer columns of the window for the coupling term).
 
     The calibrated data are in the body frame, so the task gets a configuration with an identity gyro
     mounting (a new frozen Spacecraft; the stored one is unchanged)."""
     cal_id = (job.reference or {}).get(CALIBRATION_PREFIX + kind)
-    if cal_id is None or kind != "gyro":
+    if cal_id is None or kind not in ("gyro", "magnetometer"):
         return streams, spacecraft, []
     cal = session.get(Calibration, cal_id)
     if cal is None:
         raise TaskError(f"the {kind} calibration {cal_id} chosen for this job no longer exists")
+    if kind == "magnetometer":
+        streams, notes = apply_magnetometer_calibration(streams, cal.values, torquer)
+        notes = [n.format(version=cal.version, id=cal.id, job=cal.job_id) for n in notes]
+        return streams, spacecraft, notes
     from processing.gyro_calibration.calibration import apply_gyro_calibration  # scipy-heavy: only jobs that need it
 
     v = cal.values
@@ -158,6 +172,65 @@ def _apply_calibration(session: Session, job: Job, kind: str, streams: dict[str,
     note = (f"gyro data corrected with calibration version {cal.version} (id {cal.id}, from job {cal.job_id}): "
             "mounting, scale factor and drift; gyro rates are in the body frame")
     return streams, spacecraft.with_gyro_mounting(IDENTITY_QUATERNION), [note]
+
+
+MAX_TORQUER_AGE_S = 10.0
+"""The coupling correction uses the latest magnetorquer sample at or before a magnetometer sample, if this recent."""
+
+
+def apply_magnetometer_calibration(streams: dict[str, dict[str, np.ndarray]], values: dict[str, Any],
+                                   torquer: dict[str, np.ndarray] | None,
+                                   ) -> tuple[dict[str, dict[str, np.ndarray]], list[str]]:
+    """Correct the calibrated sensor's magnetometer samples: B = (I + D)^-1 (B_meas - b - C mu_B)
+    (processing.magnetometer.model); mu_B from the latest magnetorquer sample at or before each sample
+    (samples without one within MAX_TORQUER_AGE_S are dropped when the calibration has a coupling).
+    Notes carry {version}, {id}, {job} placeholders."""
+    from processing.magnetometer.model import MagnetometerErrors
+
+    if "magnetometer" not in streams:
+        return streams, []
+    C = values.get("coupling_nT_per_A_m2")
+    errors = MagnetometerErrors(np.asarray(values["bias_nT"], dtype=np.float64),
+                                np.asarray(values["D"], dtype=np.float64),
+                                np.zeros((3, 3)) if C is None else np.asarray(C, dtype=np.float64))
+    data = dict(streams["magnetometer"])
+    sensor = values.get("sensor")
+    rows = np.ones(len(data["time_tai_ns"]), dtype=bool) if sensor is None else (
+        np.asarray(data["sensor"]).astype(str) == sensor)
+    if not np.any(rows):
+        return streams, [f"magnetometer calibration version {{version}} is for sensor {sensor!r}, which has no "
+                         "samples in the window: not applied"]
+    cols = ("bx", "by", "bz")
+    B = np.stack([np.asarray(data[c], dtype=np.float64) for c in cols], axis=-1)
+    t = np.asarray(data["time_tai_ns"], dtype=np.int64)
+    mu = None
+    drop = np.zeros(t.size, dtype=bool)
+    note = ("magnetometer data corrected with calibration version {version} (id {id}, from job {job}): bias, "
+            "scale factors, non-orthogonality")
+    if C is not None:
+        mu = np.zeros_like(B)
+        if torquer is None:
+            drop = rows.copy()
+        else:
+            order = np.argsort(torquer["time_tai_ns"], kind="stable")
+            tt = np.asarray(torquer["time_tai_ns"], dtype=np.int64)[order]
+            m = np.stack([np.asarray(torquer[c], dtype=np.float64)[order] for c in ("mx", "my", "mz")], axis=-1)
+            i = np.searchsorted(tt, t, side="right") - 1
+            ic = np.clip(i, 0, None)
+            drop = rows & ((i < 0) | (t - tt[ic] > MAX_TORQUER_AGE_S * 1e9))
+            mu = m[ic]
+        note += " and magnetorquer coupling"
+    corrected = errors.correct(B[rows], None if mu is None else mu[rows])
+    B[rows] = corrected
+    data.update({c: np.ascontiguousarray(B[:, i]) for i, c in enumerate(cols)})
+    notes = [note]
+    if np.any(drop):
+        data = {k: np.asarray(v)[~drop] for k, v in data.items()}
+        notes.append(f"{int(np.sum(drop))} magnetometer samples without a magnetorquer sample in the last "
+                     f"{MAX_TORQUER_AGE_S:g} s dropped (the calibration's coupling term needs the dipole)")
+    out = dict(streams)
+    out["magnetometer"] = data
+    return out, notes
 
 
 def input_counts(inputs: TaskInputs) -> dict[str, dict[str, int]]:

@@ -51,8 +51,9 @@ class JobCreate(BaseModel):
         "reference kind -> data set id, or 'none'; kinds the job uses and that are not given get the "
         "newest data set of that kind covering the window"))
     calibration: str = Field(default="latest", description=(
-        "for jobs that use gyro data: 'latest' (the newest gyro calibration version of the spacecraft, "
-        "if any), 'none' (raw data), or a calibration id"))
+        "for jobs that apply a calibration (gyro data; magnetometer data for gyroless_ekf and vector_attitude): "
+        "'latest' (the newest version of that kind for the spacecraft, if any), 'none' (raw data), or a "
+        "calibration id"))
     screened: bool = Field(default=False, description=(
         "use only samples accepted by the newest succeeded data_screening job of the spacecraft whose "
         "window covers this job's (002)"))

@@ -21,6 +21,13 @@ Model (defaults from 004):
   absent in the Earth's shadow (conical model, any penumbra) and during periodic outages of
   ``sun_outage_s`` per orbit centred at argument of latitude ``sun_outage_center_u_deg`` (004: 2000 s
   and 1000 s); GNSS ITRF position/velocity with white noise (zero EOP; processing.frames.earth_rotation_interp);
+- magnetometer errors (optional, default none; processing.magnetometer.model): the telemetry is
+  B_meas = (I + D) B_M + b + C mu_B + n with bias ``magnetometer_bias_nT``, symmetric D from
+  ``magnetometer_scale_factor_errors`` (D_xx, D_yy, D_zz) and ``magnetometer_non_orthogonality_rad``
+  (D_xy, D_xz, D_yz), and the magnetorquer coupling ``magnetometer_coupling_nT_per_A_m2`` (3x3, rows
+  magnetometer axes, columns body dipole axes; mu_B the dipole held from that sample on). They are applied
+  to the downlinked stream only: the on-board loop uses a magnetometer calibrated on board (the ideal one),
+  so the errors do not change the trajectory. The truth records them and the error-free b_M;
 - on board: the EKF of 004 ("ekf"), the MEKF ("mekf") or the true state ("truth") feeds the energy law
   (004 eq. 6, beta = 1e8, alpha = 1e6) or the averaged LQR (004 eq. 7, R = diag(100, 100, 0.1),
   Q = (0.1 deg)^-2 I6, designed on the true field over the first orbit), or no controller ("none");
@@ -67,6 +74,7 @@ from processing.gyroless.magnetic_control import (
     AveragedLQR,
     design_averaged_lqr,
 )
+from processing.magnetometer.model import MagnetometerErrors
 from processing.orbits.two_body import circular_orbit_state, mean_motion_rad_s
 from processing.simulate.seed004_loop import Environment004, History, LoopSetup, Sensors004, closed_loop
 from processing.units import NS_PER_S, OMEGA_EARTH_RAD_S, R_EARTH_M, RAD_PER_DEG
@@ -95,7 +103,9 @@ class Truth004:
     sunlit (K,) visible fraction of the solar disc; mu_B_A_m2 (K, 3) dipole held over [t_k, t_k+1);
     tau_d_B_N_m (K, 3) disturbance; q_OB_onboard (K, 4), omega_BO_onboard_B (K, 3) the on-board
     estimate used by the controller; r_I, v_I, r_E, v_E (K, 3) orbit; w0_rad_s mean motion;
-    inclination_rad, raan_rad, u0_rad elements; lqr the controller design (or None).
+    inclination_rad, raan_rad, u0_rad elements; lqr the controller design (or None);
+    magnetometer_errors the injected magnetometer errors (None when none) and b_M_ideal_nT the magnetometer
+    stream without them.
     """
 
     time_tai_ns: NDArray
@@ -123,6 +133,8 @@ class Truth004:
     raan_rad: float
     u0_rad: float
     lqr: AveragedLQR | None
+    magnetometer_errors: MagnetometerErrors | None = None  # injected into the telemetry (None: none)
+    b_M_ideal_nT: NDArray | None = None  # (K, 3) the magnetometer stream without the injected errors (with noise)
 
 
 @dataclass(frozen=True)
@@ -186,6 +198,10 @@ def simulate_seed004(
     q_BS: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0),
     step_s: float = 1.0,
     substeps: int = 1,
+    magnetometer_bias_nT: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    magnetometer_scale_factor_errors: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    magnetometer_non_orthogonality_rad: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    magnetometer_coupling_nT_per_A_m2: ArrayLike | None = None,
 ) -> Scenario004:
     """Simulate the closed loop of 004 for ``duration_s`` at ``step_s`` (all arguments keyword-only).
 
@@ -218,9 +234,16 @@ def simulate_seed004(
         sigma_s=max(sun_sensor_noise_deg * RAD_PER_DEG, 1e-4), energy_beta=energy_beta, energy_alpha=energy_alpha,
         K_gain=lqr.K if lqr is not None else None, max_dipole_A_m2=max_dipole_A_m2,
     )
+    try:
+        mag_errors = MagnetometerErrors.from_components(
+            magnetometer_bias_nT, magnetometer_scale_factor_errors, magnetometer_non_orthogonality_rad,
+            magnetometer_coupling_nT_per_A_m2)
+    except ValueError as exc:
+        raise Seed004ParameterError(f"magnetometer errors: {exc}") from exc
     hist = closed_loop(loop, initial_angles_deg, initial_omega_BO_rad_s)
     return _scenario004(env, sensors, loop, hist, J, time_ns, lqr, u0_rad, parameters,
-                        (gnss_position_noise_m, gnss_velocity_noise_m_s), rng_gnss)
+                        (gnss_position_noise_m, gnss_velocity_noise_m_s), rng_gnss,
+                        None if mag_errors.is_zero else mag_errors)
 
 
 def _check_parameters(p: dict[str, Any]) -> None:
@@ -302,10 +325,14 @@ def _design_lqr(env: Environment004, J: NDArray, start: np.int64, step_s: float,
 def _scenario004(
     env: Environment004, sensors: Sensors004, loop: LoopSetup, hist: History, J: NDArray, time_ns: NDArray,
     lqr: AveragedLQR | None, u0_rad: float, parameters: dict[str, Any], gnss_noise: tuple[float, float],
-    rng_gnss: Generator,
+    rng_gnss: Generator, mag_errors: MagnetometerErrors | None = None,
 ) -> Scenario004:
-    """Truth series, GNSS noise (drawn last), streams and configuration."""
+    """Truth series, GNSS noise (drawn last), streams and configuration; the magnetometer errors applied
+    to the stream (B_meas = (I + D) (b_M - n) + b + C mu + n, n the drawn noise)."""
     K, w0 = time_ns.size, env.w0
+    b_M = hist.b_M
+    if mag_errors is not None:
+        b_M = mag_errors.measure(hist.b_M - sensors.mag_noise, hist.mu) + sensors.mag_noise
     q_OB = rotations.quat_canonical(hist.q)
     q_IB = rotations.quat_canonical(rotations.quat_multiply(rotations.dcm_to_quat(env.dcm_IO), q_OB))
     c2_all = rotations.quat_rotate(rotations.quat_conjugate(q_OB), np.array([0.0, 1.0, 0.0]))
@@ -314,7 +341,7 @@ def _scenario004(
     gnss_v = env.v_E + rng_gnss.standard_normal(env.v_E.shape) * gnss_noise[1]
     vis = np.flatnonzero(env.sun_visible)
     streams = {
-        "magnetometer": {"time_tai_ns": time_ns, **{c: hist.b_M[:, i].copy() for i, c in enumerate(("bx", "by", "bz"))},
+        "magnetometer": {"time_tai_ns": time_ns, **{c: b_M[:, i].copy() for i, c in enumerate(("bx", "by", "bz"))},
                          "sensor": np.full(K, "magnetometer", dtype=object)},
         "sun_sensor": {"time_tai_ns": time_ns[vis],
                        **{c: hist.s_S[vis, i].copy() for i, c in enumerate(("sx", "sy", "sz"))},
@@ -332,6 +359,7 @@ def _scenario004(
         pitch_rad=pitch, yaw_rad=yaw, B_O_nT=env.B_O, s_O=env.s_O, sun_visible=env.sun_visible, sunlit=env.sunlit,
         mu_B_A_m2=hist.mu, tau_d_B_N_m=loop.tau_all, q_OB_onboard=rotations.quat_canonical(hist.q_est),
         omega_BO_onboard_B=hist.w_est, r_I=env.r_I, v_I=env.v_I, r_E=env.r_E, v_E=env.v_E, w0_rad_s=w0,
-        inclination_rad=env.inc, raan_rad=env.raan, u0_rad=u0_rad, lqr=lqr,
+        inclination_rad=env.inc, raan_rad=env.raan, u0_rad=u0_rad, lqr=lqr, magnetometer_errors=mag_errors,
+        b_M_ideal_nT=hist.b_M.copy(),
     )
     return Scenario004(streams=streams, config=config, truth=truth, parameters=parameters)

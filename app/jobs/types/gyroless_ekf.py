@@ -402,7 +402,7 @@ def figures(result: TaskResult, params: Params) -> dict[str, Figure]:
 JOB = JobType(
     name="gyroless_ekf", title="Gyroless attitude from magnetometer and sun sensor (EKF)", paper="004",
     params=Params, run=run, streams=("magnetometer", "sun_sensor", "gnss"), optional_streams=("magnetorquer",),
-    figures=figures,
+    figures=figures, applies_calibration="magnetometer",
     description="Attitude q_OB (orbital frame of 004), rates and in-plane disturbance torque from magnetometer, "
                 "sun sensor and GNSS with the EKF of paper 004 or a multiplicative EKF, plus an RTS smoother; "
                 "reference field IGRF-14, Sun from ERFA; consistency by NIS and innovation whiteness.",

@@ -199,7 +199,7 @@ def figures(result: TaskResult, params: Params) -> dict[str, Figure]:
 JOB = JobType(
     name="vector_attitude", title="Attitude from vector observations (002)", paper="002 eqs. 5-14, figure 1",
     params=Params, run=run, streams=("gnss",), optional_streams=("magnetometer", "panel_currents", "gnss_visibility"),
-    figures=figures, reference=("rinex_nav",),
+    figures=figures, reference=("rinex_nav",), applies_calibration="magnetometer",
     description="Attitude q_OB and 002's pitch/yaw/roll per epoch from the GNSS antenna axis (visibility of the "
                 "navigation satellites, eqs. 5-7), the magnetometer against IGRF-14 and the sun vector from the "
                 "panel currents; strongly coupled Wahba solution (eqs. 8-9) with three vectors, loosely coupled "

@@ -1,0 +1,2 @@
+"""Magnetometer calibration: the error model (model.py) and its attitude-independent estimate from |B|
+matching against the field model (calibration.py)."""
