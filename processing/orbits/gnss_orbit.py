@@ -433,3 +433,161 @@ def time_since_ascending_node_s(tai_ns: ArrayLike, r_I: ArrayLike, v_I: ArrayLik
         period = 2.0 * np.pi * np.sqrt((-MU_EARTH_M3_S2 / (2.0 * energy)) ** 3 / MU_EARTH_M3_S2)
     use = has & (dt < period)
     return np.where(use, dt, kepler)
+
+
+# ------------------------------------------------------------------------------------------------
+# Noise level and time-tag consistency of raw GNSS states (used by orbital_attitude and screening).
+
+
+def divided_difference_noise(t_s: ArrayLike, y: ArrayLike, order: int = 4) -> NDArray:
+    """Robust white-noise sigma per column of y (N, d) sampled at t_s (N,) (irregular spacing allowed).
+
+    The ``order``-th divided difference D = sum_j w_j y_j (w_j = 1 / prod_{i != j} (t_j - t_i) over
+    order + 1 consecutive samples) of a smooth signal is y^(order)(xi) / order!, negligible for an orbit
+    at 1-10 s sampling (4th: n^4 r / 24 ~ 1e-7 m/s^4), while white noise of sigma gives D ~ N(0, sigma^2
+    sum w_j^2). So sigma = 1.4826 median |D / sqrt(sum w_j^2)| -- a median, so that a few outliers or
+    late time tags (which move whole blocks, leaving only the block edges in the differences) do not
+    inflate it. Returns (d,) (NaN with fewer than order + 2 samples).
+    """
+    t = np.asarray(t_s, dtype=np.float64)
+    yy = np.asarray(y, dtype=np.float64)
+    y2 = yy if yy.ndim == 2 else yy[:, None]
+    n = t.size
+    if n < order + 2:
+        return np.full(y2.shape[1], np.nan)
+    k = np.arange(order + 1)
+    idx = np.arange(n - order)[:, None] + k[None, :]  # (m, order + 1)
+    tt = t[idx] - t[idx[:, :1]]  # relative times (precision)
+    diff = tt[:, :, None] - tt[:, None, :]  # (m, j, i)
+    diff[:, k, k] = 1.0
+    w = 1.0 / np.prod(diff, axis=2)  # (m, order + 1)
+    d = np.einsum("mj,mjc->mc", w, y2[idx])
+    z = d / np.sqrt(np.sum(w * w, axis=1))[:, None]
+    return 1.4826 * np.median(np.abs(z), axis=0)
+
+
+@dataclass(frozen=True)
+class TimeTagCheck:
+    """Per-sample time-tag consistency of GNSS states against a robust local orbit (:func:`time_tag_check`).
+
+    offset_s (N,): the time tau by which each state lags its tag (state of t - tau reported at t; > 0:
+    tagged late), NaN where not judged; shift_consistent (N,): the position and velocity residuals are
+    both explained by that tau (a pure time-tag error, not a position or velocity fault);
+    position_residual_m (N,): |r - r_fit| before the shift; applied (N,): judged.
+    """
+
+    offset_s: NDArray
+    shift_consistent: NDArray
+    position_residual_m: NDArray
+    applied: NDArray
+
+
+TIME_TAG_WINDOW_S = 600.0
+TIME_TAG_DEGREE = 7
+"""Degree of the robust position fit over TIME_TAG_WINDOW_S (1 mm over 10 min of LEO arc)."""
+
+
+def time_tag_check(time_tai_ns: ArrayLike, r_E: ArrayLike, v_E: ArrayLike, *, position_sigma_m: float,
+                   velocity_sigma_m_s: float, k: float = 6.0, window_s: float = TIME_TAG_WINDOW_S,
+                   max_gap_s: float = 120.0) -> TimeTagCheck:
+    """Time-tag offsets of GNSS states from a robust fit of the positions (dr = -v tau, dv = -a tau).
+
+    time_tai_ns (N,) increasing; r_E, v_E (N, 3) ITRF [m, m/s]; position_sigma_m, velocity_sigma_m_s: the
+    receiver's noise (1 sigma per axis). In pieces of at most ``window_s`` (split at gaps > max_gap_s) a
+    Chebyshev polynomial of degree TIME_TAG_DEGREE (mm over 10 min of LEO arc) is fitted to the positions
+    with iterative rejection of residuals beyond k x max(robust scale, sigma) -- a minority of states
+    tagged late by seconds sit kilometres off it. A state whose tag is late by tau reports r(t - tau) ~
+    r(t) - v tau and v(t - tau) ~ v(t) - a tau: tau = -(dr . v) / |v|^2 and the state is
+    ``shift_consistent`` when |dr + v tau| <= k sqrt(2) sigma_r and |dv + a tau| <= k (sigma_v + sigma_r
+    |a| / |v|) (the along-track noise passes into tau). Pieces with fewer than 3 x (degree + 1) samples
+    are not judged.
+    """
+    t = np.asarray(time_tai_ns, dtype=np.int64)
+    r = np.asarray(r_E, dtype=np.float64)
+    v = np.asarray(v_E, dtype=np.float64)
+    n = t.size
+    tau = np.full(n, np.nan)
+    consistent = np.zeros(n, dtype=bool)
+    resid = np.full(n, np.nan)
+    applied = np.zeros(n, dtype=bool)
+    if n < 3 * (TIME_TAG_DEGREE + 1):
+        return TimeTagCheck(tau, consistent, resid, applied)
+    sig_r = max(position_sigma_m, SIGMA_FLOOR_M)
+    step_ns = int(window_s / 3.0 * NS_PER_S)
+    for arc in split_arcs(t, np.inf, max_gap_s):
+        ta = t[arc]
+        for c0 in range(int(ta[0]), int(ta[-1]) + 1, step_ns):  # judge [c0, c0 + step) from a window around it
+            lo = int(np.searchsorted(ta, c0 - step_ns, side="left"))
+            hi = int(np.searchsorted(ta, c0 + 2 * step_ns, side="left"))
+            j0 = int(np.searchsorted(ta, c0, side="left"))
+            j1 = int(np.searchsorted(ta, c0 + step_ns, side="left"))
+            if j1 <= j0 or hi - lo < 3 * (TIME_TAG_DEGREE + 1):
+                continue
+            sl = slice(arc.start + lo, arc.start + hi)
+            out = _time_tag_piece(t[sl], r[sl], v[sl], sig_r, velocity_sigma_m_s, k)
+            judged = slice(j0 - lo, j1 - lo)
+            dst = slice(arc.start + j0, arc.start + j1)
+            tau[dst], consistent[dst], resid[dst] = out[0][judged], out[1][judged], out[2][judged]
+            applied[dst] = True
+    return TimeTagCheck(tau, consistent, resid, applied)
+
+
+def _time_tag_piece(t: NDArray, r: NDArray, v: NDArray, sig_r: float, sig_v: float, k: float
+                    ) -> tuple[NDArray, NDArray, NDArray]:
+    """(tau, shift_consistent, |dr|) of one window (:func:`time_tag_check`)."""
+    m = t.size
+    s = (t - t[0]).astype(np.float64) / NS_PER_S
+    half = max(0.5 * (s[-1] - s[0]), 1e-9)
+    x = (s - 0.5 * (s[0] + s[-1])) / half
+    design = cheb.chebvander(x, TIME_TAG_DEGREE)
+    # Late tags move whole blocks of states consistently (positions still the integral of the velocities):
+    # split at the increments that fail that kinematic test, seed the fit with the longest run, then
+    # accept every run that agrees with it.
+    dt = np.diff(s)
+    inc = np.linalg.norm(r[1:] - r[:-1] - 0.5 * (v[1:] + v[:-1]) * dt[:, None], axis=1)
+    jerk = 2.0 * MU_EARTH_M3_S2 * np.linalg.norm(v, axis=1) / np.linalg.norm(r, axis=1) ** 3 + 0.02
+    tol = k * np.sqrt(2.0 * sig_r ** 2 + 0.5 * (dt * sig_v) ** 2) + dt ** 3 / 12.0 * np.maximum(jerk[1:], jerk[:-1])
+    run = np.concatenate([[0], np.cumsum(inc > tol)])
+    counts = np.bincount(run)
+    order = np.argsort(-counts, kind="stable")
+    accepted = np.zeros(counts.size, dtype=bool)
+    accepted[order[0]] = True
+    thr = k * 1.6 * sig_r
+    if counts[order[0]] >= 2 * (TIME_TAG_DEGREE + 1):
+        for j in order[1:]:  # grow: a run joins when the fit with it still fits every accepted run
+            trial = accepted.copy()
+            trial[j] = True
+            sel = trial[run]
+            c, *_ = np.linalg.lstsq(design[sel], r[sel], rcond=None)
+            e = np.linalg.norm(r - design @ c, axis=1)
+            med = np.array([np.median(e[run == i]) if trial[i] else 0.0 for i in range(counts.size)])
+            if np.all(med <= thr):
+                accepted = trial
+        use = accepted[run]
+    else:
+        use = np.ones(m, dtype=bool)
+    coef = np.zeros((TIME_TAG_DEGREE + 1, 3))
+    for _ in range(8):  # ... then rejection beyond k x the noise
+        coef, *_ = np.linalg.lstsq(design[use], r[use], rcond=None)
+        e = np.linalg.norm(r - design @ coef, axis=1)
+        scale = float(np.median(e[use])) / 1.5382  # median of chi_3 -> sigma per axis
+        new = e <= k * max(scale, sig_r) * 1.6
+        if new.sum() < 2 * (TIME_TAG_DEGREE + 1) or np.array_equal(new, use):
+            break
+        use = new
+    r_fit = design @ coef
+    v_fit = cheb.chebval(x, cheb.chebder(coef) / half).T
+    a_fit = cheb.chebval(x, cheb.chebder(coef, 2) / half ** 2).T
+    j_fit = cheb.chebval(x, cheb.chebder(coef, 3) / half ** 3).T
+    dr = r - r_fit
+    speed2 = np.sum(v_fit * v_fit, axis=1)
+    tau = -np.sum(dr * v_fit, axis=1) / speed2
+    for _ in range(3):  # r(t - tau) = r - v tau + a tau^2 / 2 - j tau^3 / 6 (tau of seconds: 50 m at 3.4 s)
+        t2 = tau[:, None] ** 2
+        tau = -np.sum((dr - a_fit * t2 / 2.0 + j_fit * t2 * tau[:, None] / 6.0) * v_fit, axis=1) / speed2
+    tc = tau[:, None]
+    e_r = np.linalg.norm(dr + v_fit * tc - a_fit * tc ** 2 / 2.0 + j_fit * tc ** 3 / 6.0, axis=1)
+    e_v = np.linalg.norm(v - v_fit + a_fit * tc - j_fit * tc ** 2 / 2.0, axis=1)
+    acc = np.linalg.norm(a_fit, axis=1)
+    ok = (e_r <= k * np.sqrt(2.0) * sig_r) & (e_v <= k * (sig_v + sig_r * acc / np.sqrt(speed2)))
+    return tau, ok, np.linalg.norm(dr, axis=1)
