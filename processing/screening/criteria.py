@@ -198,6 +198,21 @@ def _screen_star_tracker(col: Collector, cols: Columns, spacecraft: Spacecraft, 
             expected = np.diff(ang, axis=0)
             jump = np.linalg.norm(rot - expected, axis=1)
             tol = p.k_quaternion * (np.sqrt(2) * p.star_tracker_error_rad + p.gyro_rate_error_rad_s * dt)
+            # where a gyro gap (> 3 gyro steps) spans the interval the interpolated angle says nothing:
+            # judge those intervals against the largest plausible rate instead
+            dtg = np.diff(tg)
+            holes = np.concatenate([[0], np.cumsum(dtg > 3.0 * np.median(dtg))])
+            j0 = np.clip(np.searchsorted(tg, t[:-1], side="right") - 1, 0, tg.size - 1)
+            j1 = np.clip(np.searchsorted(tg, t[1:], side="left"), 0, tg.size - 1)
+            blind = holes[j1] > holes[j0]
+            # the tracker's own noise may exceed the configured error (e.g. a boresight axis 5-10x the others):
+            # at least k x the robust scatter of the residuals per axis (union bound: |e| <= k |sigma|)
+            resid = (rot - expected)[~blind & np.all(np.isfinite(expected), axis=1)]
+            if resid.shape[0] >= 20:
+                sig = 1.4826 * np.median(np.abs(resid - np.median(resid, axis=0)), axis=0)
+                tol = np.maximum(tol, p.k_quaternion * float(np.sqrt(np.sum(sig ** 2))))
+            jump = np.where(blind, np.maximum(np.linalg.norm(rot, axis=1) - p.max_rate_rad_s * dt, 0.0), jump)
+            tol = np.where(blind, p.k_quaternion * np.sqrt(2) * p.star_tracker_error_rad, tol)
             if intervals is not None:
                 intervals.append((t, jump, tol))
         else:
