@@ -591,3 +591,124 @@ def _time_tag_piece(t: NDArray, r: NDArray, v: NDArray, sig_r: float, sig_v: flo
     acc = np.linalg.norm(a_fit, axis=1)
     ok = (e_r <= k * np.sqrt(2.0) * sig_r) & (e_v <= k * (sig_v + sig_r * acc / np.sqrt(speed2)))
     return tau, ok, np.linalg.norm(dr, axis=1)
+
+
+GNSS_RMS_RATIO_MAX = 2.0
+"""The fit's residual rms may exceed the receiver noise by this factor before the fit is called inconsistent."""
+
+
+@dataclass(frozen=True)
+class GnssFitCheck:
+    """The GNSS fit's residuals judged against the receiver's noise (:func:`check_gnss_fit`).
+
+    position_sigma_m / velocity_sigma_m_s: the noise used (given, or estimated from the samples' divided
+    differences, ``noise_source``); rms_ratio (2,): fit residual rms / noise for position and velocity;
+    chi2, dof, p_value: of the squared residuals over noise^2 (both kinds); consistent: both ratios below
+    GNSS_RMS_RATIO_MAX. Cause analysis (when not consistent): late_tags (N,) states whose residuals are a time
+    shift, late_offset_s (median shift of those, > 0: tagged late), inertial_velocity (velocities look
+    inertial: v - dr/dt ~ w_E x r), cause: short text. position_error_m, velocity_error_m_s: the fit's
+    error per axis to pass on to what is derived from it (the orbital frame).
+    """
+
+    position_sigma_m: float
+    velocity_sigma_m_s: float
+    noise_source: str
+    rms_ratio: tuple[float, float]
+    chi2: float
+    dof: int
+    p_value: float
+    consistent: bool
+    late_tags: NDArray
+    late_offset_s: float | None
+    inertial_velocity: bool
+    cause: str | None
+    position_error_m: float
+    velocity_error_m_s: float
+
+
+def check_gnss_fit(fit: GnssFit, time_tai_ns: ArrayLike, r_E: ArrayLike, v_E: ArrayLike, *,
+                   position_sigma_m: float | None = None, velocity_sigma_m_s: float | None = None) -> GnssFitCheck:
+    """Judge a fit against the receiver noise and name the likely cause when it does not fit.
+
+    The noise is the given one or, per kind, the robust divided-difference estimate of the samples
+    (:func:`divided_difference_noise`: insensitive to a minority of late tags, which move whole blocks).
+    The fit is inconsistent when its residual rms exceeds GNSS_RMS_RATIO_MAX x that noise (a chi-square test
+    would call any mis-stated noise inconsistent with 10^4 samples; the ratio says how far). Causes tried:
+    time tags (:func:`time_tag_check`: residuals that are one time shift, in position and velocity) and
+    the velocity frame (Earth-relative velocities expected; inertial ones differ by w_E x r, ~0.5 km/s).
+    position_error_m / velocity_error_m_s: the fit's error at the samples to pass on to derived frames:
+    sigma sqrt(p / n) per axis when consistent, the residual rms itself when not (the fit follows the
+    inconsistent data by an unknown share).
+    """
+    from processing.estimation.chi2 import chi2_sf
+    from processing.units import OMEGA_EARTH_RAD_S
+
+    t, r, v = _as_states(time_tai_ns, r_E, v_E)
+    t_s = (t - t[0]).astype(np.float64) / NS_PER_S
+    est_r = float(np.sqrt(np.mean(divided_difference_noise(t_s, r) ** 2)))
+    est_v = float(np.sqrt(np.mean(divided_difference_noise(t_s, v) ** 2)))
+    sig_r = max(position_sigma_m if position_sigma_m is not None else est_r, SIGMA_FLOOR_M)
+    sig_v = max(velocity_sigma_m_s if velocity_sigma_m_s is not None else est_v, SIGMA_FLOOR_M_S)
+    source = ("given" if position_sigma_m is not None and velocity_sigma_m_s is not None else
+              "estimated from the divided differences of the samples" if position_sigma_m is None
+              and velocity_sigma_m_s is None else "given (position or velocity) and estimated (the other)")
+    rms_r = float(np.sqrt(np.mean(fit.position_rms_m ** 2)))
+    rms_v = float(np.sqrt(np.mean(fit.velocity_rms_m_s ** 2)))
+    n = fit.n_samples
+    p = sum((a.degree + 1) if a.method == "chebyshev" else sum(a.harmonics) + 2 for a in fit.arcs)
+    chi2 = 3.0 * n * ((rms_r / sig_r) ** 2 + (rms_v / sig_v) ** 2)
+    dof = max(6 * n - 3 * p, 1)
+    ratio = (rms_r / sig_r, rms_v / sig_v)
+    consistent = max(ratio) <= GNSS_RMS_RATIO_MAX
+    late = np.zeros(t.size, dtype=bool)
+    offset = None
+    inertial = False
+    cause = None
+    if not consistent:
+        chk = time_tag_check(t, r, v, position_sigma_m=sig_r, velocity_sigma_m_s=sig_v)
+        speed = np.linalg.norm(v, axis=1)
+        late = chk.applied & chk.shift_consistent & (np.abs(chk.offset_s) > 6.0 * sig_r / np.maximum(speed, 1.0))
+        if np.any(late):
+            offset = float(np.median(chk.offset_s[late]))
+            cause = (f"time tags: {int(late.sum())} states are time-tagged {abs(offset):.3g} s "
+                     f"{'late' if offset > 0 else 'early'} (positions and velocities are those of one time shift)")
+        v_pos = _position_rate(t, r)  # the positions' own rate of change (the joint fit compromises)
+        w_x_r = np.cross([0.0, 0.0, OMEGA_EARTH_RAD_S], r)
+        ok = np.isfinite(v_pos).all(axis=1)
+        if np.any(ok):
+            dv = v[ok] - v_pos[ok]
+            inertial = bool(np.median(np.linalg.norm(dv - w_x_r[ok], axis=1))
+                            < 0.1 * np.median(np.linalg.norm(w_x_r[ok], axis=1))
+                            and np.median(np.linalg.norm(dv, axis=1)) > 0.5 * np.median(np.linalg.norm(w_x_r[ok],
+                                                                                                        axis=1)))
+        if inertial:
+            cause = ((cause + "; ") if cause else "") + ("frame: the velocities differ from the positions' rate of "
+                                                         "change by w_E x r, i.e. they are inertial, not Earth-fixed")
+        if cause is None:
+            cause = ("unknown: neither a time-tag offset nor an inertial velocity frame explains the residuals; check "
+                     "the frame (ITRF expected), the units and the time scale of the GNSS states")
+    if consistent:
+        pos_err = sig_r * float(np.sqrt(min(1.0, p / max(n, 1))))
+        vel_err = sig_v * float(np.sqrt(min(1.0, p / max(n, 1))))
+    else:
+        pos_err, vel_err = rms_r, rms_v
+    return GnssFitCheck(position_sigma_m=sig_r, velocity_sigma_m_s=sig_v, noise_source=source,
+                        rms_ratio=(float(ratio[0]), float(ratio[1])), chi2=float(chi2), dof=int(dof),
+                        p_value=float(chi2_sf(chi2, dof)), consistent=bool(consistent), late_tags=late,
+                        late_offset_s=offset, inertial_velocity=inertial, cause=cause, position_error_m=pos_err,
+                        velocity_error_m_s=vel_err)
+
+
+def _position_rate(t: NDArray, r: NDArray) -> NDArray:
+    """dr/dt (N, 3) of a Chebyshev fit of degree TIME_TAG_DEGREE to the positions alone, per piece of at most
+    TIME_TAG_WINDOW_S (NaN in pieces too short)."""
+    out = np.full(r.shape, np.nan)
+    for sl in split_arcs(t, TIME_TAG_WINDOW_S, 120.0):
+        if sl.stop - sl.start < 2 * (TIME_TAG_DEGREE + 1):
+            continue
+        s = (t[sl] - t[sl.start]).astype(np.float64) / NS_PER_S
+        half = max(0.5 * (s[-1] - s[0]), 1e-9)
+        x = (s - 0.5 * (s[0] + s[-1])) / half
+        coef, *_ = np.linalg.lstsq(cheb.chebvander(x, TIME_TAG_DEGREE), r[sl], rcond=None)
+        out[sl] = cheb.chebval(x, cheb.chebder(coef) / half).T
+    return out
