@@ -48,3 +48,19 @@ def test_data_screening_clean_realistic_data_raise_no_warning():
     assert res.warnings == []
     assert res.summary["n_rejected"] <= 1e-3 * res.summary["n_total"]
     assert "gyro" in res.summary["findings"]["quantisation"]
+
+
+def test_telemetry_coverage_summary_stays_small_with_thousands_of_gaps():
+    from app.jobs.types import coverage
+
+    sc = scenario(duration_s=7200.0, seed=13, dropout_probability=0.2)
+    res = coverage.JOB.run(inputs(sc), coverage.Params(), no_progress)
+    text = json.dumps(jsonable(res.summary), allow_nan=False)
+    n_gaps = res.summary["n_gaps"]
+    assert n_gaps > 3000 and len(text) < 10_000
+    assert len(res.tables["gaps"]["time_tai_ns"]) == n_gaps  # every gap in the table
+    st = next(s for s in res.summary["streams"] if s["stream"] == "gyro")
+    assert st["gaps_listed"] == len(st["gaps"]) == coverage.GAPS_IN_SUMMARY < st["n_gaps"]
+    assert 135.0 <= st["longest_gap_s"] < 140.0
+    fig = coverage.figures(res, coverage.Params())["coverage"]
+    assert len(fig.axes[0].collections) >= 3  # coverage bars and the gaps drawn from the table
