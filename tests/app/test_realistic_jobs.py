@@ -7,12 +7,13 @@ import json
 from functools import cache
 
 import numpy as np
+import pytest
 
 from app.jobs.outputs import jsonable
 from app.jobs.types import data_screening
 from processing.simulate.realistic import simulate_realistic
 from processing.spacecraft import Spacecraft
-from processing.tasks import TaskInputs, no_progress
+from processing.tasks import TaskError, TaskInputs, no_progress
 from processing.time.timescales import iso_to_tai_ns
 
 T0 = int(iso_to_tai_ns("2023-06-01T00:00:00"))
@@ -64,3 +65,32 @@ def test_telemetry_coverage_summary_stays_small_with_thousands_of_gaps():
     assert 135.0 <= st["longest_gap_s"] < 140.0
     fig = coverage.figures(res, coverage.Params())["coverage"]
     assert len(fig.axes[0].collections) >= 3  # coverage bars and the gaps drawn from the table
+
+
+def test_gyro_bias_fit_splits_the_arc_at_gyro_gaps_and_combines_the_segments():
+    from app.jobs.types import gyro_bias_fit
+
+    sc = scenario(duration_s=1200.0, seed=14, n_long_gaps=2, dropout_probability=0.02)
+    gaps_s = np.diff(sc.streams["gyro"]["time_tai_ns"]) / 1e9
+    assert gaps_s.max() >= 135.0
+    params = gyro_bias_fit.Params(subintervals=[])
+    res = gyro_bias_fit.JOB.run(inputs(sc, ("star_tracker", "gyro")), params, no_progress)
+    s = res.summary
+    json.dumps(jsonable(s), allow_nan=False)
+    t_g = sc.streams["gyro"]["time_tai_ns"]
+    cut = np.flatnonzero(gaps_s > params.max_gyro_gap_s)
+    edges = np.concatenate([[t_g[0]], t_g[cut], t_g[cut + 1], [t_g[-1]]])
+    spans_s = (np.sort(edges)[1::2] - np.sort(edges)[0::2]) / 1e9  # runs between the gaps
+    n_fit = int(np.sum(spans_s >= params.min_segment_s))
+    assert n_fit >= 2 and len(s["segments"]) == s["combined"]["n_segments"] == n_fit
+    truth = sc.truth.gyro_bias_rad_s  # q_BG = identity: gyro frame = body frame
+    b, sig = np.array(s["gyro_bias_rad_s"]), np.array(s["gyro_bias_sigma_rad_s"])
+    assert np.all(np.abs(b - truth) < 4.0 * sig), ((b - truth) / sig)
+    for row in s["segments"]:  # each segment's own estimate, against the truth
+        rb, rs = np.array(row["gyro_bias_rad_s"]), np.array(row["gyro_bias_sigma_rad_s"])
+        assert np.all(np.abs(rb - truth) < 4.0 * rs)
+        assert np.all(sig <= rs)  # the combination is tighter than any one segment
+    assert "segments" in res.tables and any(f"split at {cut.size} gyro gap" in n for n in res.notes)
+    with pytest.raises(TaskError, match="split_at_gyro_gaps"):
+        gyro_bias_fit.JOB.run(inputs(sc, ("star_tracker", "gyro")),
+                              gyro_bias_fit.Params(subintervals=[], split_at_gyro_gaps=False), no_progress)
