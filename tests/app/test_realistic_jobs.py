@@ -94,3 +94,25 @@ def test_gyro_bias_fit_splits_the_arc_at_gyro_gaps_and_combines_the_segments():
     with pytest.raises(TaskError, match="split_at_gyro_gaps"):
         gyro_bias_fit.JOB.run(inputs(sc, ("star_tracker", "gyro")),
                               gyro_bias_fit.Params(subintervals=[], split_at_gyro_gaps=False), no_progress)
+
+
+def test_pipeline_bridges_rejected_gyro_rates_instead_of_opening_gaps():
+    from app.jobs.types import reconstruction
+
+    sc = scenario(duration_s=900.0, seed=15, n_late_blocks=0, dropout_probability=0.0, n_long_gaps=0)
+    g = dict(sc.streams["gyro"])
+    g["wx"] = g["wx"].copy()
+    bad = np.arange(50, 850, 40)  # isolated faulty rates the star tracker does not confirm
+    g["wx"][bad] += 5e-3
+    streams = {**sc.streams, "gyro": g}
+    window = TaskInputs(streams=streams, spacecraft=Spacecraft.from_json(sc.config),
+                        start_tai_ns=int(g["time_tai_ns"][0]), end_tai_ns=int(g["time_tai_ns"][-1]))
+    res = data_screening.JOB.run(window, data_screening.Params(energy_model="two_body"), no_progress)
+    assert res.summary["streams"]["gyro"]["spike"]["n_rejected"] == bad.size
+    dropped, removed = reconstruction.apply_screening(streams, res)
+    assert removed["gyro"] == bad.size
+    bridged, info = reconstruction.apply_screening(streams, res, bridge_gyro_s=5.0)
+    assert info.get("gyro", 0) == 0 and info["gyro_bridged"] == bad.size
+    np.testing.assert_array_equal(bridged["gyro"]["time_tai_ns"], g["time_tai_ns"])  # no gap opened
+    truth_wx = sc.truth.gyro_w_B[bad, 0] + sc.truth.gyro_bias_rad_s[0]
+    assert np.max(np.abs(bridged["gyro"]["wx"][bad] - truth_wx)) < 1e-4  # the fault gone, the rate interpolated
