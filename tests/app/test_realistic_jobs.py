@@ -116,3 +116,13 @@ def test_pipeline_bridges_rejected_gyro_rates_instead_of_opening_gaps():
     np.testing.assert_array_equal(bridged["gyro"]["time_tai_ns"], g["time_tai_ns"])  # no gap opened
     truth_wx = sc.truth.gyro_w_B[bad, 0] + sc.truth.gyro_bias_rad_s[0]
     assert np.max(np.abs(bridged["gyro"]["wx"][bad] - truth_wx)) < 1e-4  # the fault gone, the rate interpolated
+
+
+def test_text_plain_upload_without_format_gets_a_hint():
+    from app.ingest.parse import UnsupportedMediaType, parse_body
+
+    with pytest.raises(UnsupportedMediaType, match=r"format= \(gracefo-l1b, ccsds-oem, ccsds-aem"):
+        parse_body(b"header\n1 2 3\n", "text/plain; charset=utf-8")
+    with pytest.raises(UnsupportedMediaType) as exc:
+        parse_body(b"x", "image/png")
+    assert "format=" not in str(exc.value)
