@@ -126,3 +126,29 @@ def test_text_plain_upload_without_format_gets_a_hint():
     with pytest.raises(UnsupportedMediaType) as exc:
         parse_body(b"x", "image/png")
     assert "format=" not in str(exc.value)
+
+
+def test_orbital_attitude_job_warns_of_late_gnss_tags_and_specs_judge_the_stated_sequence():
+    from app.jobs.types import orbital_attitude
+    from app.reports import specs
+
+    sc = scenario(duration_s=900.0, seed=16, n_late_blocks=1, late_block_s=60.0, manoeuvre_start_s=300.0,
+                  manoeuvre_duration_s=200.0)
+    params = orbital_attitude.Params(euler_sequence="321", smoothing=False, write_aem=False)
+    res = orbital_attitude.JOB.run(inputs(sc, ("star_tracker", "gnss")), params, no_progress)
+    s = res.summary
+    json.dumps(jsonable(s), allow_nan=False)
+    (w,) = res.warnings
+    assert w.code == "time_offset" and "3.4 s late" in w.message and w.evidence["n_dropped_late_tags"] > 0
+    assert s["euler_sequence"] == "321" and "yaw" in s["euler_sequence_description"]
+    assert s["manoeuvres"]["n"] == 1 and s["gnss_fit"]["check_after_dropping"]["consistent"]
+    assert set(s["angle_sigma_arcsec"]) == {"pitch", "yaw", "roll"}
+    assert s["angles_by_sequence"]["321"]["yaw_deg"] == s["yaw_deg"]
+    spec = specs.Specifications.model_validate(
+        {"orbital_attitude_deg": {"pitch": [-1.0, 1.0], "euler_sequence": "321"}})
+    checks = specs.evaluate("orbital_attitude", s, spec)
+    assert [c.passed for c in checks] == [(True,), (True,)]  # 3-2-1 pitch stays small through the yaw turn
+    spec231 = specs.Specifications.model_validate({"orbital_attitude_deg": {"pitch": [-1.0, 1.0]}})
+    checks231 = specs.evaluate("orbital_attitude", s, spec231)
+    assert (False,) in [c.passed for c in checks231]  # the same data in 2-3-1 leave the pitch range
+    assert all(c.key.startswith("angles_by_sequence.231.") for c in checks231)
