@@ -408,9 +408,11 @@ def _run_segments(inputs: TaskInputs, params: Params, progress: Progress,
             notes.append(f"gyro segment {k + 1} ({_iso(a)} to {_iso(b)}, {(b - a) / NS_PER_S:.3g} s) is shorter than "
                          f"min_segment_s = {params.min_segment_s:g} s: skipped")
             continue
+        def seg_progress(f: float, st: str, k: int = k) -> None:
+            progress((k + f) / len(segments), f"segment {k + 1}: {st}")
+
         try:
-            res = _run_one(_restricted(inputs, a, b), one,
-                           lambda f, st, k=k: progress((k + f) / len(segments), f"segment {k + 1}: {st}"))
+            res = _run_one(_restricted(inputs, a, b), one, seg_progress)
         except TaskError as exc:
             notes.append(f"gyro segment {k + 1} ({_iso(a)} to {_iso(b)}) not fitted: {exc}")
             continue
@@ -418,13 +420,13 @@ def _run_segments(inputs: TaskInputs, params: Params, progress: Progress,
     if not results:
         raise TaskError(f"the gyro gaps beyond max_gyro_gap_s = {params.max_gyro_gap_s:g} s leave no segment that "
                         "can be fitted: " + "; ".join(notes))
-    b = np.array([r.summary["gyro_bias_rad_s"] for _, r in results], dtype=float)
+    bias = np.array([r.summary["gyro_bias_rad_s"] for _, r in results], dtype=float)
     sig = np.array([r.summary["gyro_bias_sigma_rad_s"] for _, r in results], dtype=float)
     w = 1.0 / sig ** 2
-    comb = np.sum(w * b, axis=0) / np.sum(w, axis=0)
+    comb = np.sum(w * bias, axis=0) / np.sum(w, axis=0)
     comb_sig = 1.0 / np.sqrt(np.sum(w, axis=0))
     dof = 3 * (len(results) - 1)
-    chi2 = float(np.sum((b - comb) ** 2 * w))
+    chi2 = float(np.sum((bias - comb) ** 2 * w))
     p = float(chi2_sf(chi2, dof)) if dof else 1.0
     consistent = p >= 0.01
     inflation = 1.0 if consistent else float(np.sqrt(chi2 / dof))
@@ -471,7 +473,7 @@ def _run_segments(inputs: TaskInputs, params: Params, progress: Progress,
     tables["segments"] = {
         "time_tai_ns": np.array([r["start_tai_ns"] for r in rows], dtype=np.int64),
         "end_tai_ns": np.array([r["end_tai_ns"] for r in rows], dtype=np.int64),
-        **{f"gyro_bias{i + 1}_rad_s": b[:, i] for i in range(3)},
+        **{f"gyro_bias{i + 1}_rad_s": bias[:, i] for i in range(3)},
         **{f"gyro_bias{i + 1}_sigma_rad_s": sig[:, i] for i in range(3)}}
     return TaskResult(summary=summary, tables=tables, notes=notes + list(base.notes), files=dict(base.files),
                       warnings=warnings)
