@@ -595,6 +595,10 @@ def _time_tag_piece(t: NDArray, r: NDArray, v: NDArray, sig_r: float, sig_v: flo
 
 GNSS_RMS_RATIO_MAX = 2.0
 """The fit's residual rms may exceed the receiver noise by this factor before the fit is called inconsistent."""
+GNSS_RESIDUAL_FLOOR_M = 1.0
+GNSS_RESIDUAL_FLOOR_M_S = 1e-3
+"""Residual rms below these is never inconsistent: it turns a LEO orbital frame by < 0.03 arcsec (a precise
+orbit, e.g. GRACE-FO GNV1B with sub-mm noise, leaves sub-mm model residuals above its noise)."""
 
 
 @dataclass(frozen=True)
@@ -632,8 +636,9 @@ def check_gnss_fit(fit: GnssFit, time_tai_ns: ArrayLike, r_E: ArrayLike, v_E: Ar
 
     The noise is the given one or, per kind, the robust divided-difference estimate of the samples
     (:func:`divided_difference_noise`: insensitive to a minority of late tags, which move whole blocks).
-    The fit is inconsistent when its residual rms exceeds GNSS_RMS_RATIO_MAX x that noise (a chi-square test
-    would call any mis-stated noise inconsistent with 10^4 samples; the ratio says how far). Causes tried:
+    The fit is inconsistent when its residual rms exceeds GNSS_RMS_RATIO_MAX x that noise and the floors
+    GNSS_RESIDUAL_FLOOR_M / _M_S (a chi-square test would call any mis-stated noise inconsistent with 10^4
+    samples; the ratio says how far). Causes tried:
     time tags (:func:`time_tag_check`: residuals that are one time shift, in position and velocity) and
     the velocity frame (Earth-relative velocities expected; inertial ones differ by w_E x r, ~0.5 km/s).
     position_error_m / velocity_error_m_s: the fit's error at the samples to pass on to derived frames:
@@ -659,7 +664,8 @@ def check_gnss_fit(fit: GnssFit, time_tai_ns: ArrayLike, r_E: ArrayLike, v_E: Ar
     chi2 = 3.0 * n * ((rms_r / sig_r) ** 2 + (rms_v / sig_v) ** 2)
     dof = max(6 * n - 3 * p, 1)
     ratio = (rms_r / sig_r, rms_v / sig_v)
-    consistent = max(ratio) <= GNSS_RMS_RATIO_MAX
+    consistent = (rms_r <= max(GNSS_RMS_RATIO_MAX * sig_r, GNSS_RESIDUAL_FLOOR_M)
+                  and rms_v <= max(GNSS_RMS_RATIO_MAX * sig_v, GNSS_RESIDUAL_FLOOR_M_S))
     late = np.zeros(t.size, dtype=bool)
     offset = None
     inertial = False

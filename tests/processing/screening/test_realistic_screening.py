@@ -123,3 +123,28 @@ def test_a_transient_seen_by_gyro_and_star_tracker_is_not_a_fault():
     assert not real.rejected("star_tracker").any()
     assert spike["fault"].flagged[k] and "transients" not in fault.findings
     assert fault.rejected("star_tracker").any()  # the star tracker disagrees with the faulty gyro there
+
+
+def _gracefo_gnv(sat):
+    from processing.formats import gracefo_l1b as l1b
+    from tests.real_data import GRACEFO
+
+    t, r, v, _frame = l1b.gnv_states(l1b.parse_l1b((GRACEFO / f"GNV1B_2023-06-01_{sat}_04.txt").read_bytes()))
+    return t, r, v
+
+
+@pytest.mark.parametrize("sat", ["C", "D"])
+def test_gracefo_gnv1b_precise_orbit_is_consistent_and_a_late_block_in_it_is_found(sat):
+    from processing.orbits.gnss_orbit import check_gnss_fit, fit_gnss
+
+    t, r, v = _gracefo_gnv(sat)  # 100 s of POD orbit at 1 Hz (sub-mm noise)
+    c = check_gnss_fit(fit_gnss(t, r, v), t, r, v)
+    assert c.consistent and c.cause is None  # sub-mm model residuals above the noise are not a fault
+    chk = time_tag_check(t, r, v, position_sigma_m=0.01, velocity_sigma_m_s=1e-5)
+    assert chk.applied.all() and chk.shift_consistent.all() and np.nanmax(np.abs(chk.offset_s)) < 1e-4
+    # the states of rows 40..59 replaced by those 3 rows earlier (tags 3 s late), as a receiver would report
+    r2, v2 = r.copy(), v.copy()
+    r2[40:60], v2[40:60] = r[37:57], v[37:57]
+    c2 = check_gnss_fit(fit_gnss(t, r2, v2), t, r2, v2, position_sigma_m=0.01, velocity_sigma_m_s=1e-5)
+    assert not c2.consistent and abs(c2.late_offset_s - 3.0) < 1e-3
+    np.testing.assert_array_equal(np.flatnonzero(c2.late_tags), np.arange(40, 60))
