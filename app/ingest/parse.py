@@ -36,8 +36,11 @@ def parse_body(body: bytes, content_type: str | None) -> pa.Table:
     """Return the upload as an Arrow table; raise UploadError (422) or UnsupportedMediaType (415)."""
     kind = media_type(content_type)
     if kind not in SUPPORTED_TYPES:
+        hint = ("; a text file in a mission format (GRACE-FO Level-1B ASCII, CCSDS OEM or AEM) is uploaded with the "
+                "query parameter format= (gracefo-l1b, ccsds-oem, ccsds-aem: GET /api/v1/formats lists them)"
+                if kind == "text/plain" else "")
         raise UnsupportedMediaType(
-            f"Content-Type {kind or '(none)'!r} is not supported; use one of {', '.join(SUPPORTED_TYPES)}")
+            f"Content-Type {kind or '(none)'!r} is not supported; use one of {', '.join(SUPPORTED_TYPES)}{hint}")
     if not body.strip():
         raise UploadError([RowError(None, None, "the request body is empty")])
     try:

@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, model_validator
 
@@ -47,6 +47,9 @@ class OrbitalAttitudeRanges(_Strict):
     pitch: Range | None = None
     yaw: Range | None = None
     roll: Range | None = None
+    euler_sequence: Literal["231", "321"] = Field(
+        "231", description="sequence the ranges are written in: 231 = 003 §1.6 pitch, yaw, roll; 321 = yaw, pitch, "
+                           "roll (LVLH); judged on the job's angles in that sequence whatever its euler_sequence")
 
 
 class Limit(_Strict):
@@ -186,14 +189,21 @@ def evaluate(job_type: str, summary: Mapping[str, Any] | None, specs: Specificat
             check = replace(check, components=tuple(str(a) for a in axes))
         checks.append(check)
     if job_type == "orbital_attitude" and specs.orbital_attitude_deg:
+        seq = specs.orbital_attitude_deg.euler_sequence
+        by_seq = summary.get("angles_by_sequence")
+        in_seq = by_seq.get(seq) if isinstance(by_seq, Mapping) else None
+        own = summary.get("euler_sequence", "231") == seq
         for angle in ("pitch", "yaw", "roll"):
             bounds = getattr(specs.orbital_attitude_deg, angle)
-            stats = summary.get(f"{angle}_deg")
+            stats = in_seq.get(f"{angle}_deg") if isinstance(in_seq, Mapping) else (
+                summary.get(f"{angle}_deg") if own else None)
             if bounds is None or not isinstance(stats, Mapping):
                 continue
+            prefix = f"angles_by_sequence.{seq}." if isinstance(in_seq, Mapping) else ""
             for stat, lo, hi in (("min", bounds[0], None), ("max", None, bounds[1])):
-                checks.append(_bound_check(f"Orbital {angle} ({stat} over the window)", f"{angle}_deg.{stat}",
-                                           stats.get(stat), scale=1.0, unit="deg", lo=lo, hi=hi, absolute=False))
+                checks.append(_bound_check(f"Orbital {angle} ({stat} over the window, sequence {seq})",
+                                           f"{prefix}{angle}_deg.{stat}", stats.get(stat), scale=1.0, unit="deg",
+                                           lo=lo, hi=hi, absolute=False))
     bias_key = {"gyro_bias_fit": "gyro_bias_rad_s", "alignment_calibration": "drift_rad_s"}.get(job_type)
     if bias_key and specs.gyro_bias_max_deg_h:
         checks.append(_bound_check("Gyro bias (per axis)", bias_key, summary.get(bias_key), scale=DEG_H_PER_RAD_S,

@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from processing.environment import igrf_field_E_nT, sun_position_I_m, sunlit_fraction
-from processing.screening.tools import hampel, stuck, time_grid
+from processing.screening.tools import hampel, quantisation_step, stuck, time_grid_irregular
 
 Columns = Mapping[str, NDArray[Any]]
 VECTOR_COLUMNS = {
@@ -86,6 +86,14 @@ class ScreeningParams:
     quaternion_norm_tolerance: float = 1e-3
     grazing_altitude_m: float = 50e3
     max_interpolation_gap_s: float = 30.0
+    k_time_tag: float = 6.0
+    """GNSS ``time_tag``: a state is tagged off when its residuals are a time shift beyond k dr / |v| (0: off)."""
+    k_time_jitter: float = 6.0
+    """``time_grid`` tolerance at least k x the robust scatter of the intervals (irregular sampling)."""
+    stuck_false_alarm: float = 1e-5
+    """Quantised values repeat by chance: ``stuck`` needs runs that chance makes rarer than this per row."""
+    transient_consistency: bool = True
+    """A gyro spike whose angle the star tracker sees too is a real transient, not rejected."""
 
 
 @dataclass(frozen=True)
@@ -114,6 +122,10 @@ class ScreeningResult:
     criteria: list[Criterion]
     n_rows: dict[str, int]
     notes: list[str] = field(default_factory=list)
+    findings: dict[str, Any] = field(default_factory=dict)
+    """What the screening found besides flags (JSON-able): ``gnss_time_tags`` (estimated offsets of late
+    tags), ``transients`` (gyro spikes confirmed by the star tracker), ``quantisation`` (LSB per stream),
+    ``irregular_sampling`` (streams whose grid could not be judged)."""
 
     def rejected(self, stream: str) -> NDArray[np.bool_]:
         out = np.zeros(self.n_rows[stream], dtype=bool)
@@ -191,18 +203,40 @@ UNITS = {"magnetometer": "nT", "gyro": "rad/s", "gyro_increments": "rad", "sun_s
 """Unit of each stream's values (of the spike statistic)."""
 
 
+def stuck_min_run(values: NDArray[np.float64], lsb: NDArray[np.float64], min_run: int, false_alarm: float) -> int:
+    """The run length that makes ``stuck`` a fault on quantised data: with a fraction p of rows equal to their
+    predecessor (the noise below the LSB), a run of m equal rows arises by chance with probability ~p^(m-1);
+    m is raised until that is below ``false_alarm`` (never below ``min_run``; unquantised data: min_run)."""
+    if values.shape[0] < 2 or not np.any(lsb > 0):
+        return min_run
+    p1 = float(np.mean(np.all(values[1:] == values[:-1], axis=1)))
+    if p1 <= 0.0 or p1 >= 1.0:
+        return min_run
+    return max(min_run, 1 + int(np.ceil(np.log(false_alarm) / np.log(p1))))
+
+
 def generic_checks(col: Collector, cols: Columns, stream: str, rows: NDArray[np.int64], p: ScreeningParams,
-                   spike: bool = True, stuck_ignore: NDArray[np.bool_] | None = None) -> None:
-    """time_grid, stuck and (with ``spike``) the Hampel spike test on the rows of one sensor group."""
+                   spike: bool = True, stuck_ignore: NDArray[np.bool_] | None = None,
+                   findings: dict[str, Any] | None = None) -> None:
+    """time_grid (tolerance widened by the sampling jitter), stuck (run length raised for quantised values)
+    and (with ``spike``) the Hampel spike test (threshold at least a few LSB) on the rows of one sensor group."""
     t = np.asarray(cols["time_tai_ns"], dtype=np.int64)[rows]
-    flagged, dev, period = time_grid(t, p.time_grid_tolerance)
-    col.add("time_grid", rows, flagged, dev, p.time_grid_tolerance, "fraction of the sampling period", "generic")
+    flagged, dev, period, tol = time_grid_irregular(t, p.time_grid_tolerance, p.k_time_jitter)
+    col.add("time_grid", rows, flagged, dev, tol, "fraction of the sampling period", "generic")
+    if findings is not None and tol >= 0.5:
+        findings.setdefault("irregular_sampling", []).append(stream)
     names = VECTOR_COLUMNS.get(stream)
     if names is None:
         return
     values = np.stack([np.asarray(cols[c], dtype=np.float64)[rows] for c in names], axis=1)
-    col.add("stuck", rows, stuck(values, p.stuck_min_run, stuck_ignore), np.full(rows.size, np.nan),
-            float(p.stuck_min_run), "samples", "generic")
+    lsb = quantisation_step(values)
+    if findings is not None and np.any(lsb > 0):
+        findings.setdefault("quantisation", {})[stream] = {c: float(q) for c, q in zip(names, lsb, strict=True)}
+    run = stuck_min_run(values, lsb, p.stuck_min_run, p.stuck_false_alarm)
+    col.add("stuck", rows, stuck(values, run, stuck_ignore), np.full(rows.size, np.nan),
+            float(run), "samples", "generic")
     if spike and rows.size > 2 * p.spike_half_window:
-        dist, th, f = hampel(values, p.spike_half_window, p.k_spike)
+        q2 = float(np.sum(lsb ** 2))
+        floor = p.k_spike * np.sqrt(q2 / 12.0) + np.sqrt(q2)  # rounding noise, plus one LSB of the median
+        dist, th, f = hampel(values, p.spike_half_window, p.k_spike, floor=floor)
         col.add("spike", rows, f, dist, th, UNITS.get(stream, ""), "generic")

@@ -57,9 +57,11 @@ processing.screening.tools. All are re-exported here.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from processing.attitude import rotations
 from processing.screening.base import (
@@ -101,11 +103,14 @@ __all__ = [  # the screening API, wherever it is defined (base, gnss, panels, to
     "rolling_median", "screen", "stuck", "sun_from_currents", "time_grid",
 ]
 
+_Interval = tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]
+"""Star-tracker times (n,), quaternion_jump residual and tolerance per interval (n - 1,) [rad]."""
+
 
 def _screen_magnetometer(col: Collector, cols: Columns, p: ScreeningParams, track: GnssTrack | None,
-                         env: Environment, notes: list[str]) -> None:
+                         env: Environment, notes: list[str], findings: dict[str, Any] | None = None) -> None:
     for _sensor, rows in sensor_groups(cols):
-        generic_checks(col, cols, "magnetometer", rows, p)
+        generic_checks(col, cols, "magnetometer", rows, p, findings=findings)
         if track is None:
             continue
         t = np.asarray(cols["time_tai_ns"], dtype=np.int64)[rows]
@@ -161,7 +166,9 @@ def _screen_visibility(col: Collector, cols: Columns, p: ScreeningParams, track:
 
 
 def _screen_star_tracker(col: Collector, cols: Columns, spacecraft: Spacecraft, gyro: Columns | None,
-                         p: ScreeningParams) -> None:
+                         p: ScreeningParams, findings: dict[str, Any] | None = None,
+                         intervals: list[_Interval] | None = None
+                         ) -> None:
     """quaternion_norm and quaternion_jump; against the gyro (which needs the mountings: MissingMountingError
     for a tracker not in the configuration) when there are gyro rates, else against max_rate_rad_s."""
     for sensor, rows in sensor_groups(cols):
@@ -170,7 +177,7 @@ def _screen_star_tracker(col: Collector, cols: Columns, spacecraft: Spacecraft, 
         norm_dev = np.abs(np.linalg.norm(q, axis=1) - 1.0)
         col.add("quaternion_norm", rows, norm_dev > p.quaternion_norm_tolerance, norm_dev, p.quaternion_norm_tolerance,
                 "", "generic")
-        generic_checks(col, cols, "star_tracker", rows, p, spike=False)
+        generic_checks(col, cols, "star_tracker", rows, p, spike=False, findings=findings)
         if rows.size < 2:
             continue
         qn = q / np.linalg.norm(q, axis=1, keepdims=True)
@@ -191,6 +198,23 @@ def _screen_star_tracker(col: Collector, cols: Columns, spacecraft: Spacecraft, 
             expected = np.diff(ang, axis=0)
             jump = np.linalg.norm(rot - expected, axis=1)
             tol = p.k_quaternion * (np.sqrt(2) * p.star_tracker_error_rad + p.gyro_rate_error_rad_s * dt)
+            # where a gyro gap (> 3 gyro steps) spans the interval the interpolated angle says nothing:
+            # judge those intervals against the largest plausible rate instead
+            dtg = np.diff(tg)
+            holes = np.concatenate([[0], np.cumsum(dtg > 3.0 * np.median(dtg))])
+            j0 = np.clip(np.searchsorted(tg, t[:-1], side="right") - 1, 0, tg.size - 1)
+            j1 = np.clip(np.searchsorted(tg, t[1:], side="left"), 0, tg.size - 1)
+            blind = holes[j1] > holes[j0]
+            # the tracker's own noise may exceed the configured error (e.g. a boresight axis 5-10x the others):
+            # at least k x the robust scatter of the residuals per axis (union bound: |e| <= k |sigma|)
+            resid = (rot - expected)[~blind & np.all(np.isfinite(expected), axis=1)]
+            if resid.shape[0] >= 20:
+                sig = 1.4826 * np.median(np.abs(resid - np.median(resid, axis=0)), axis=0)
+                tol = np.maximum(tol, p.k_quaternion * float(np.sqrt(np.sum(sig ** 2))))
+            jump = np.where(blind, np.maximum(np.linalg.norm(rot, axis=1) - p.max_rate_rad_s * dt, 0.0), jump)
+            tol = np.where(blind, p.k_quaternion * np.sqrt(2) * p.star_tracker_error_rad, tol)
+            if intervals is not None:
+                intervals.append((t, jump, tol))
         else:
             jump = np.maximum(np.linalg.norm(rot, axis=1) - p.max_rate_rad_s * dt, 0.0)
             tol = p.k_quaternion * np.sqrt(2) * p.star_tracker_error_rad * np.ones_like(dt)
@@ -213,6 +237,8 @@ def screen(streams: Mapping[str, Columns], spacecraft: Spacecraft, params: Scree
     """
     p = params or ScreeningParams()
     env = env or Environment()
+    findings: dict[str, Any] = {}
+    st_intervals: list[_Interval] = []
     chosen = list(streams) if selected is None else [s for s in selected if s in streams]
     notes: list[str] = []
     criteria: list[Criterion] = []
@@ -220,7 +246,7 @@ def screen(streams: Mapping[str, Columns], spacecraft: Spacecraft, params: Scree
     track: GnssTrack | None = None
     if "gnss" in streams:
         gcol = Collector("gnss", len(streams["gnss"]["time_tai_ns"]))
-        track = screen_gnss(gcol, streams["gnss"], p, reference_orbit, reference_frame, notes)
+        track = screen_gnss(gcol, streams["gnss"], p, reference_orbit, reference_frame, notes, findings)
         if "gnss" in chosen:
             criteria += gcol.criteria()
             n_rows["gnss"] = gcol.n
@@ -236,16 +262,55 @@ def screen(streams: Mapping[str, Columns], spacecraft: Spacecraft, params: Scree
                 raise ScreeningError(f"stream {name} lacks the column {c!r}")
         col = Collector(name, n)
         if name == "magnetometer":
-            _screen_magnetometer(col, cols, p, track, env, notes)
+            _screen_magnetometer(col, cols, p, track, env, notes, findings)
         elif name == "panel_currents":
-            screen_panels(col, cols, spacecraft, p, track, env, notes)
+            screen_panels(col, cols, spacecraft, p, track, env, notes, findings)
         elif name == "gnss_visibility":
             _screen_visibility(col, cols, p, track, nav, notes)
         elif name == "star_tracker":
-            _screen_star_tracker(col, cols, spacecraft, streams.get("gyro"), p)
+            _screen_star_tracker(col, cols, spacecraft, streams.get("gyro"), p, findings, st_intervals)
         else:
             for _sensor, rows in sensor_groups(cols):
-                generic_checks(col, cols, name, rows, p)
+                generic_checks(col, cols, name, rows, p, findings=findings)
         criteria += col.criteria()
         n_rows[name] = n
-    return ScreeningResult(criteria=criteria, n_rows=n_rows, notes=notes)
+    if p.transient_consistency and st_intervals and "gyro" in n_rows:
+        criteria = _confirmed_transients(criteria, streams["gyro"], st_intervals, findings)
+    return ScreeningResult(criteria=criteria, n_rows=n_rows, notes=notes, findings=findings)
+
+
+def _confirmed_transients(criteria: list[Criterion], gyro: Columns,
+                          intervals: list[_Interval],
+                          findings: dict[str, Any]) -> list[Criterion]:
+    """Gyro spikes that the star tracker sees too are real rate transients, not faults: the spike's excess
+    rotation |w - median| (t_k+1 - t_k-1) / 2 would make every star-tracker interval over [t_k-1, t_k+1]
+    fail quaternion_jump (it exceeds the tolerance there) if the gyro were wrong, and none fails. Those rows
+    are taken out of ``spike`` and counted in findings["transients"]."""
+    out = []
+    for c in criteria:
+        if c.stream != "gyro" or c.name != "spike" or not np.any(c.flagged):
+            out.append(c)
+            continue
+        t = np.asarray(gyro["time_tai_ns"], dtype=np.int64)
+        confirmed = np.zeros(c.flagged.size, dtype=bool)
+        prev_row = np.arange(t.size)
+        next_row = np.arange(t.size)
+        for _sensor, rows in sensor_groups(gyro):  # time-order neighbours within each sensor
+            prev_row[rows[1:]], next_row[rows[:-1]] = rows[:-1], rows[1:]
+        for k in np.flatnonzero(c.flagged):
+            lo, hi = t[prev_row[k]], t[next_row[k]]
+            excess = c.statistic[k] * (hi - lo) / 2.0 / NS_PER_S
+            for t_st, jump, tol in intervals:
+                i0 = max(int(np.searchsorted(t_st, lo, side="right")) - 1, 0)
+                i1 = min(int(np.searchsorted(t_st, hi, side="left")), t_st.size - 1)
+                if i1 <= i0 or t_st[i0] > lo or t_st[i1] < hi:
+                    continue
+                j, tl = jump[i0:i1], tol[i0:i1]
+                if np.all(np.isfinite(j)) and np.all(j <= tl) and excess > float(np.max(tl)):
+                    confirmed[k] = True
+                    break
+        if np.any(confirmed):
+            findings["transients"] = {"gyro_spikes_confirmed_by_star_tracker": int(confirmed.sum()),
+                                      "first_tai_ns": [int(x) for x in t[confirmed][:10]]}
+        out.append(replace(c, flagged=c.flagged & ~confirmed))
+    return out

@@ -6,6 +6,7 @@ position model (:class:`GnssTrack`) of the other streams' criteria.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -23,7 +24,7 @@ from processing.screening.tools import (
     robust_polyfit,
     rolling_median,
     stuck,
-    time_grid,
+    time_grid_irregular,
 )
 from processing.units import J2_EARTH, MU_EARTH_M3_S2, NS_PER_S, OMEGA_EARTH_RAD_S, R_EARTH_M
 
@@ -65,13 +66,43 @@ def reference_h(reference: Columns, frame: str, t_ns: NDArray[np.int64], model: 
     return out
 
 
+def screen_time_tags(col: Collector, t: NDArray[np.int64], r: NDArray[np.float64], v: NDArray[np.float64],
+                     rows: NDArray[np.int64], p: ScreeningParams, findings: dict[str, Any] | None) -> NDArray[np.bool_]:
+    """The ``time_tag`` criterion (processing.orbits.gnss_orbit.time_tag_check): states whose position and
+    velocity residuals against a robust local orbit are both those of a time shift tau, |tau| beyond
+    k_time_tag x dr / |v|. Returns the flagged rows (n,) and adds the estimated offsets to ``findings``."""
+    from processing.orbits.gnss_orbit import time_tag_check
+
+    dr, dv = p.gnss_position_error_m, p.gnss_velocity_error_m_s
+    chk = time_tag_check(t, r, v, position_sigma_m=dr, velocity_sigma_m_s=dv, k=p.k_time_tag)
+    speed = np.linalg.norm(v, axis=1)
+    tol = p.k_time_tag * dr / np.maximum(speed, 1.0)
+    stat = np.abs(chk.offset_s)
+    flagged = chk.applied & chk.shift_consistent & (stat > tol)
+    col.add("time_tag", rows, flagged, np.where(chk.applied, chk.offset_s, np.nan), float(np.median(tol)), "s",
+            "generic", chk.applied)
+    if findings is not None and np.any(flagged):
+        tau = chk.offset_s[flagged]
+        runs = int(np.sum(np.diff(np.concatenate([[0], flagged.astype(np.int8), [0]])) == 1))
+        findings.setdefault("gnss_time_tags", []).append({
+            "n_states": int(flagged.sum()), "n_runs": runs, "offset_s_median": float(np.median(tau)),
+            "offset_s_min": float(np.min(tau)), "offset_s_max": float(np.max(tau)),
+            "first_tai_ns": int(t[flagged][0]), "last_tai_ns": int(t[flagged][-1])})
+    return flagged
+
+
 def screen_gnss(col: Collector, cols: Columns, p: ScreeningParams, reference: Columns | None,
-                 reference_frame: str, notes: list[str]) -> GnssTrack | None:
+                 reference_frame: str, notes: list[str], findings: dict[str, Any] | None = None) -> GnssTrack | None:
     track = None
-    for _sensor, rows in sensor_groups(cols):
-        t = np.asarray(cols["time_tai_ns"], dtype=np.int64)[rows]
-        r = np.stack([np.asarray(cols[c], dtype=np.float64)[rows] for c in ("x", "y", "z")], axis=1)
-        v = np.stack([np.asarray(cols[c], dtype=np.float64)[rows] for c in ("vx", "vy", "vz")], axis=1)
+    for _sensor, rows_all in sensor_groups(cols):
+        t_all = np.asarray(cols["time_tai_ns"], dtype=np.int64)[rows_all]
+        r_all = np.stack([np.asarray(cols[c], dtype=np.float64)[rows_all] for c in ("x", "y", "z")], axis=1)
+        v_all = np.stack([np.asarray(cols[c], dtype=np.float64)[rows_all] for c in ("vx", "vy", "vz")], axis=1)
+        late = screen_time_tags(col, t_all, r_all, v_all, rows_all, p, findings) if p.k_time_tag > 0 else \
+            np.zeros(rows_all.size, bool)
+        # the other criteria judge the states with consistent tags (a late block would make its good
+        # neighbours fail the kinematic and velocity tests)
+        rows, t, r, v = rows_all[~late], t_all[~late], r_all[~late], v_all[~late]
         dr, dv = p.gnss_position_error_m, p.gnss_velocity_error_m_s
         bad = np.zeros(rows.size, bool)
         # Kinematic consistency of positions (increments vs trapezoid of velocities).
@@ -133,11 +164,11 @@ def screen_gnss(col: Collector, cols: Columns, p: ScreeningParams, reference: Co
         applied = np.isfinite(dvv)
         col.add("velocity", rows, dvv > tol_v, dvv, float(np.nanmedian(tol_v)), "m/s", "generic", applied)
         bad |= applied & (dvv > tol_v)
-        flagged, dev_t, _ = time_grid(t, p.time_grid_tolerance)
-        col.add("time_grid", rows, flagged, dev_t, p.time_grid_tolerance, "fraction of the sampling period", "generic")
+        flagged_all, dev_t, _, tol_t = time_grid_irregular(t_all, p.time_grid_tolerance)
+        col.add("time_grid", rows_all, flagged_all, dev_t, tol_t, "fraction of the sampling period", "generic")
         col.add("stuck", rows, stuck(np.concatenate([r, v], axis=1), p.stuck_min_run), np.full(rows.size, np.nan),
                 float(p.stuck_min_run), "samples", "generic")
-        bad |= flagged
+        bad |= flagged_all[~late]
         if track is None and np.sum(~bad) >= 2:
             track = GnssTrack(t[~bad], r[~bad], v[~bad])
     return track

@@ -59,7 +59,8 @@ def sun_from_currents(currents_a: ArrayLike, normals_B: ArrayLike, max_current_a
 
 
 def screen_panels(col: Collector, cols: Columns, spacecraft: Spacecraft, p: ScreeningParams,
-                  track: GnssTrack | None, env: Environment, notes: list[str]) -> None:
+                  track: GnssTrack | None, env: Environment, notes: list[str],
+                  findings: dict[str, Any] | None = None) -> None:
     """panel_range, panel_eclipse and panel_sun_norm (002 eq. 17) where the solar panels are configured
     (the ``panel`` column indexes ``spacecraft.solar_panels``), and the generic checks per panel."""
     panel_cfg = (spacecraft.panel_normals_B(), spacecraft.panel_max_current_a()) if spacecraft.solar_panels else None
@@ -71,7 +72,7 @@ def screen_panels(col: Collector, cols: Columns, spacecraft: Spacecraft, p: Scre
         cur = np.asarray(cols["current_a"], dtype=np.float64)[rows]
         for k in np.unique(panel):
             sub = rows[panel == k]
-            generic_checks(col, cols, "panel_currents", sub, p,
+            generic_checks(col, cols, "panel_currents", sub, p, findings=findings,
                            stuck_ignore=np.abs(np.asarray(cols["current_a"], dtype=float)[sub]) <= tol)
         if panel_cfg is None:
             continue

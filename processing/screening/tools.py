@@ -110,6 +110,56 @@ def time_grid(t_ns: ArrayLike, tolerance: float) -> tuple[NDArray[np.bool_], NDA
     return flagged, dev, period
 
 
+def time_grid_irregular(t_ns: ArrayLike, tolerance: float, k: float = 6.0
+                        ) -> tuple[NDArray[np.bool_], NDArray[np.float64], int, float]:
+    """:func:`time_grid` with a tolerance that accounts for the sampling jitter seen in the data.
+
+    The signed offsets of the intervals from whole multiples of the period have a robust scale s
+    (1.4826 MAD); a clock whose tags scatter that much is not faulty, so the tolerance is max(tolerance,
+    k s). When that reaches half a period the stream has no grid to judge (irregular sampling, e.g. tags
+    of an asynchronous downlink): only duplicated times are flagged (tolerance 0.5). Returns (flagged (n,),
+    deviation (n,), period_ns, the tolerance used)."""
+    t = np.asarray(t_ns, dtype=np.int64)
+    tol = float(tolerance)
+    if t.size >= 3:
+        dt = np.diff(t)
+        positive = dt[dt > 0]
+        if positive.size >= 2:
+            ratio = positive / float(np.median(positive))
+            off = ratio - np.round(ratio)
+            scale = 1.4826 * float(np.median(np.abs(off - np.median(off))))
+            tol = min(max(tol, k * scale), 0.5)
+    flagged, dev, period = time_grid(t, tol)
+    return flagged, dev, period, tol
+
+
+def quantisation_step(values: ArrayLike) -> NDArray[np.float64]:
+    """Least significant bit per column of values (n,) or (n, d), estimated from the data (0 when the
+    values are not on a grid).
+
+    The step q is the smallest positive difference between distinct sorted values; the column is
+    quantised when (nearly) every value is a whole multiple of q (|v / q - round(v / q)| < 0.01 for 99 %
+    of them) and q is not below 1e-12 of the values' magnitude (unquantised floats).
+    """
+    a = np.asarray(values, dtype=np.float64)
+    a2 = a if a.ndim == 2 else a[:, None]
+    out = np.zeros(a2.shape[1])
+    for j in range(a2.shape[1]):
+        col = a2[:, j][np.isfinite(a2[:, j])]
+        u = np.unique(col)
+        if u.size < 3:
+            continue
+        d = np.diff(u)
+        q = float(np.min(d))
+        big = float(np.max(np.abs(u)))
+        if q <= 1e-12 * max(big, 1e-300):
+            continue
+        frac = np.abs(col / q - np.round(col / q))
+        if np.mean(frac < 0.01) >= 0.99:
+            out[j] = q
+    return out
+
+
 def robust_polyfit(t_s: ArrayLike, y: ArrayLike, degree: int = 1, iterations: int = 5, k: float = 4.0,
                    exclude: ArrayLike | None = None) -> NDArray[np.float64]:
     """Least-squares polynomial of t with iterative rejection of |residual| > k * 1.4826 MAD.

@@ -46,9 +46,12 @@ from processing.attitude import rotations
 from processing.frames.earth_orientation import EarthOrientation, canonical_inertial_frame, inertial_to_gcrs_mat
 from processing.frames.orbital import q_IO_003, q_IO_lvlh_004
 from processing.orbits.gnss_orbit import (
+    GNSS_RMS_RATIO_MAX,
     EopSource,
     GnssFit,
+    GnssFitCheck,
     ascending_nodes,
+    check_gnss_fit,
     fit_gnss,
     gnss_to_gcrs,
     time_since_ascending_node_s,
@@ -68,6 +71,17 @@ SEGMENT_MAX_S = 1200.0
 """003 §1.3: segments of at most 20 min."""
 
 SmoothingFrame = Literal["orbital", "inertial"]
+EulerSequence = Literal["231", "321"]
+EULER_SEQUENCES: dict[str, str] = {
+    "231": "2-3-1: pitch about orbital axis 2, then yaw about the new axis 3, then roll about the new axis 1 "
+           "(003 §1.6)",
+    "321": "3-2-1: yaw about orbital axis 3, then pitch about the new axis 2, then roll about the new axis 1 "
+           "(the common LVLH yaw-pitch-roll)",
+}
+"""The Euler sequences offered for the reported angles (intrinsic, from the orbital frame O to the body B)."""
+MANOEUVRE_K = 8.0
+"""A manoeuvre: the smoothed rate relative to the orbital frame beyond median + k x robust scale."""
+MANOEUVRE_HALF_WINDOW = 5
 
 
 class OrbitalAttitudeError(ValueError):
@@ -121,13 +135,92 @@ class OrbitalAttitude:
     smoothing: bool
     smoothing_frame: str
     segments: tuple[SmoothingSegment, ...] = field(default=())
+    euler_sequence: str = "231"
+    q_OB_raw: NDArray | None = None
+    manoeuvres_tai_ns: tuple[tuple[int, int], ...] = ()
+    gnss_check: GnssFitCheck | None = None
+    orbit_frame_sigma_rad: NDArray | None = None
+    """(3,) error of the orbital frame from the GNSS fit, about the pitch, yaw and roll axes."""
+    attitude_sigma_rad: NDArray | None = None
+    """(3,) star-tracker part of the angle error (smoothed: the fit's; raw: the noise), pitch, yaw, roll."""
+    gnss_recheck: GnssFitCheck | None = None
+    gnss_dropped_late: int = 0
 
-    def angle_statistics_deg(self, raw: bool = False) -> dict[str, dict[str, float]]:
+    def angle_statistics_deg(self, raw: bool = False, sequence: str | None = None) -> dict[str, dict[str, float]]:
         """{pitch_deg, yaw_deg, roll_deg: {mean, std, min, max}} in degrees (the job summary);
-        ``raw``: of the unsmoothed angles. See :func:`angle_stats_deg`."""
-        series = ((self.pitch_raw_rad, self.yaw_raw_rad, self.roll_raw_rad) if raw
-                  else (self.pitch_rad, self.yaw_rad, self.roll_rad))
+        ``raw``: of the unsmoothed angles; ``sequence``: in another Euler sequence than the result's.
+        See :func:`angle_stats_deg`."""
+        if sequence is not None and sequence != self.euler_sequence:
+            q = self.q_OB_raw if raw and self.q_OB_raw is not None else self.q_OB
+            series = euler_angles(q, sequence)
+        else:
+            series = ((self.pitch_raw_rad, self.yaw_raw_rad, self.roll_raw_rad) if raw
+                      else (self.pitch_rad, self.yaw_rad, self.roll_rad))
         return {name: angle_stats_deg(a) for name, a in zip(("pitch_deg", "yaw_deg", "roll_deg"), series, strict=True)}
+
+
+def euler_angles(q_OB: ArrayLike, sequence: str) -> tuple[NDArray, NDArray, NDArray]:
+    """(pitch, yaw, roll) [rad] of q_OB (..., 4) in an intrinsic Euler sequence (EULER_SEQUENCES).
+
+    "231": processing.attitude.rotations.pitch_yaw_roll_from_quat (003 §1.6: q_OB = q_y(pitch) o q_z(yaw) o
+    q_x(roll)); "321": q_OB = q_z(yaw) o q_y(pitch) o q_x(roll) (scipy's intrinsic "ZYX"), pitch in
+    [-90, 90] deg, singular at pitch +-90 deg where 2-3-1 is singular at yaw +-90 deg (a yaw manoeuvre).
+    """
+    if sequence == "231":
+        return rotations.pitch_yaw_roll_from_quat(q_OB)
+    if sequence == "321":
+        from scipy.spatial.transform import Rotation
+
+        q = np.asarray(q_OB, dtype=np.float64)
+        yaw, pitch, roll = np.moveaxis(
+            Rotation.from_quat(q.reshape(-1, 4), scalar_first=True).as_euler("ZYX").reshape(q.shape[:-1] + (3,)),
+            -1, 0)
+        return pitch, yaw, roll
+    raise OrbitalAttitudeError(f"euler_sequence must be one of {', '.join(EULER_SEQUENCES)}, got {sequence!r}")
+
+
+def detect_manoeuvres(time_tai_ns: NDArray, q: NDArray, *, k: float = MANOEUVRE_K,
+                      half_window: int = MANOEUVRE_HALF_WINDOW, max_gap_s: float = 60.0) -> list[tuple[int, int]]:
+    """Manoeuvres in an attitude series q (N, 4) relative to a reference motion (q_OS: the orbital frame).
+
+    The rate of each interval, rotvec(q_k^-1 q_k+1) / dt, is averaged over +-half_window intervals (the
+    star-tracker noise averages down; intervals across gaps > max_gap_s are left out); its norm beyond
+    median + k x 1.4826 MAD (both from the data: the attitude's normal motion and noise) starts a
+    manoeuvre, which extends on both sides while the norm stays above median + 2 x the scale (hysteresis:
+    the slow start and end of the turn belong to it). Returns [start, stop) sample index ranges.
+    """
+    n = time_tai_ns.size
+    if n < 4 * half_window + 4:
+        return []
+    dq = rotations.quat_multiply(rotations.quat_conjugate(q[:-1]), q[1:])
+    dt = np.diff(time_tai_ns).astype(np.float64) / NS_PER_S
+    ok = dt <= max_gap_s
+    rate = np.where(ok[:, None], rotations.quat_to_rotvec(dq) / dt[:, None], 0.0)
+    w = 2 * half_window + 1
+    c = np.concatenate([np.zeros((1, 3)), np.cumsum(rate, axis=0)])
+    cn = np.concatenate([[0], np.cumsum(ok)])
+    lo = np.clip(np.arange(n - 1) - half_window, 0, n - 1)
+    hi = np.clip(np.arange(n - 1) + half_window + 1, 0, n - 1)
+    cnt = np.maximum(cn[hi] - cn[lo], 1)
+    mean = (c[hi] - c[lo]) / cnt[:, None]
+    norm = np.linalg.norm(mean, axis=1)
+    med = float(np.median(norm[ok]))
+    scale = 1.4826 * float(np.median(np.abs(norm[ok] - med)))
+    high = ok & (norm > med + k * scale) & (cnt >= w // 2)
+    if not np.any(high):
+        return []
+    low = norm > med + 2.0 * scale
+    runs = np.concatenate([[0], np.cumsum(np.diff(low.astype(np.int8)) != 0)])  # runs of equal 'low'
+    keep = np.unique(runs[high])
+    out: list[tuple[int, int]] = []
+    for r in keep:
+        idx = np.flatnonzero(runs == r)
+        a, b = int(idx[0]), int(idx[-1]) + 2  # intervals a..b-2 -> samples a..b-1
+        if out and a <= out[-1][1] + w:
+            out[-1] = (out[-1][0], b)
+        else:
+            out.append((a, b))
+    return out
 
 
 def angle_stats_deg(a_rad: ArrayLike) -> dict[str, float]:
@@ -201,7 +294,7 @@ def fit_trend_sines(t_s: NDArray, y: NDArray, *, trend_degree: int = 3, harmonic
 
 def smooth_attitude(
     time_tai_ns: NDArray, q: NDArray, *, harmonics: int | None = None, trend_degree: int = 3,
-    segment_max_s: float = SEGMENT_MAX_S, max_gap_s: float = 60.0,
+    segment_max_s: float = SEGMENT_MAX_S, max_gap_s: float = 60.0, breaks: tuple[int, ...] = (),
 ) -> tuple[NDArray, tuple[SmoothingSegment, ...]]:
     """003 §1.3 smoothing of an attitude series q (N, 4) (any frame pair); returns q_sm at the samples.
 
@@ -212,10 +305,14 @@ def smooth_attitude(
     form), M_i by generalised cross-validation -- it minimises the expected error of the fit at the
     samples, which is what the angles need -- unless ``harmonics`` is given; q_sm = q_c o s(z_fit).
     Segments with fewer than MIN_SMOOTHING_SAMPLES samples are returned unsmoothed (harmonics -1).
+    ``breaks``: sample indices where a segment must also start (manoeuvre boundaries).
     """
     out = q.copy()
     segs: list[SmoothingSegment] = []
-    for sl in split_segments(time_tai_ns, segment_max_s, max_gap_s):
+    bounds = sorted({0, time_tai_ns.size, *(int(b) for b in breaks if 0 < b < time_tai_ns.size)})
+    pieces = [slice(a + s.start, a + s.stop) for a, b in zip(bounds[:-1], bounds[1:], strict=True)
+              for s in split_segments(time_tai_ns[a:b], segment_max_s, max_gap_s)]
+    for sl in pieces:
         n = sl.stop - sl.start
         if n < MIN_SMOOTHING_SAMPLES:
             segs.append(SmoothingSegment(sl.start, sl.stop, (-1, -1, -1), np.full(3, np.nan)))
@@ -254,6 +351,11 @@ def orbital_attitude(
     gnss_method: Literal["chebyshev", "sine"] = "chebyshev",
     segment_max_s: float = SEGMENT_MAX_S,
     max_gap_s: float = 60.0,
+    euler_sequence: EulerSequence = "231",
+    segment_at_manoeuvres: bool = True,
+    gnss_position_sigma_m: float | None = None,
+    gnss_velocity_sigma_m_s: float | None = None,
+    drop_late_gnss_tags: bool = True,
     progress: Callable[[float, str], None] | None = None,
 ) -> OrbitalAttitude:
     """Pitch, yaw, roll of 003 §1.6 (module docstring) from star-tracker and GNSS telemetry.
@@ -262,11 +364,32 @@ def orbital_attitude(
     first; gnss_time_tai_ns (K,), r_E, v_E (K, 3) ITRF [m, m/s]; q_BS (4,) mounting (sensor ->
     body); eop: EarthOrientation, a callable tai_ns -> EarthOrientation, or None (zero).
     Star-tracker samples outside the GNSS arcs are dropped (listed in ``dropped_tai_ns``).
+    euler_sequence: of the reported angles (EULER_SEQUENCES). segment_at_manoeuvres: smoothing segments
+    start and end at the manoeuvres found in q_OS (:func:`detect_manoeuvres`). The GNSS fit is judged
+    against the receiver noise (given, or estimated from the samples: processing.orbits.gnss_orbit
+    .check_gnss_fit); its error passes into ``orbit_frame_sigma_rad``. drop_late_gnss_tags: when the check
+    finds states whose residuals are a time shift (late tags), the orbit is fitted again without them
+    (``gnss_check`` keeps the first check, ``gnss_dropped_late`` counts them, ``gnss_recheck`` judges the refit).
     """
     report = progress or (lambda f, s: None)
     t, q, frame, q_BS_arr = _checked_inputs(time_tai_ns, q_XS, q_BS, inertial_frame, orbital_frame, smoothing_frame)
+    if euler_sequence not in EULER_SEQUENCES:
+        raise OrbitalAttitudeError(f"euler_sequence must be one of {', '.join(EULER_SEQUENCES)}, "
+                                   f"got {euler_sequence!r}")
     report(0.1, "GNSS orbit fit")
     fit = fit_gnss(gnss_time_tai_ns, r_E, v_E, method=gnss_method)
+    gnss_check = check_gnss_fit(fit, gnss_time_tai_ns, r_E, v_E, position_sigma_m=gnss_position_sigma_m,
+                                velocity_sigma_m_s=gnss_velocity_sigma_m_s)
+    recheck = None
+    n_late = 0
+    if drop_late_gnss_tags and not gnss_check.consistent and np.any(gnss_check.late_tags):
+        keep = ~gnss_check.late_tags
+        n_late = int(gnss_check.late_tags.sum())
+        tg, rg, vg = (np.asarray(x)[keep] for x in (gnss_time_tai_ns, r_E, v_E))
+        fit = fit_gnss(tg, rg, vg, method=gnss_method)
+        recheck = check_gnss_fit(fit, tg, rg, vg, position_sigma_m=gnss_position_sigma_m,
+                                 velocity_sigma_m_s=gnss_velocity_sigma_m_s)
+    frame_check = recheck or gnss_check
     covered = fit.covered(t)
     if not np.any(covered):
         raise OrbitalAttitudeError("no star-tracker sample lies within the GNSS arcs (the two streams do not "
@@ -277,14 +400,16 @@ def orbital_attitude(
     q_OB_raw = rotations.quat_canonical(rotations.quat_multiply(fr.q_OS, q_SB))
     segments: tuple[SmoothingSegment, ...] = ()
     q_OB = q_OB_raw
+    man = detect_manoeuvres(fr.time_tai_ns, fr.q_OS, max_gap_s=max_gap_s) if segment_at_manoeuvres else []
     if smoothing:  # 4
         report(0.5, "smoothing (003 §1.3)")
+        breaks = tuple(i for ab in man for i in ab)
         q_OS, segments = _smoothed_q_OS(fr, smoothing_frame, harmonics=harmonics, trend_degree=trend_degree,
-                                        segment_max_s=segment_max_s, max_gap_s=max_gap_s)
+                                        segment_max_s=segment_max_s, max_gap_s=max_gap_s, breaks=breaks)
         q_OB = rotations.quat_canonical(rotations.quat_multiply(q_OS, q_SB))
     report(0.8, "angles and ascending nodes")  # 5
-    pitch, yaw, roll = rotations.pitch_yaw_roll_from_quat(q_OB)
-    pitch_raw, yaw_raw, roll_raw = rotations.pitch_yaw_roll_from_quat(q_OB_raw)
+    pitch, yaw, roll = euler_angles(q_OB, euler_sequence)
+    pitch_raw, yaw_raw, roll_raw = euler_angles(q_OB_raw, euler_sequence)
     nodes = ascending_nodes(fit, eop)
     since = time_since_ascending_node_s(fr.time_tai_ns, fr.r_I, fr.v_I, nodes)
     q_GB = rotations.quat_canonical(rotations.quat_multiply(fr.q_GO, q_OB))
@@ -293,8 +418,40 @@ def orbital_attitude(
         pitch_raw_rad=pitch_raw, yaw_raw_rad=yaw_raw, roll_raw_rad=roll_raw, time_since_node_s=since,
         ascending_nodes_tai_ns=nodes, r_I=fr.r_I, v_I=fr.v_I, dropped_tai_ns=fr.dropped_tai_ns, gnss=fit,
         inertial_frame=frame, orbital_frame=orbital_frame, smoothing=smoothing, smoothing_frame=smoothing_frame,
-        segments=segments,
+        segments=segments, euler_sequence=euler_sequence, q_OB_raw=q_OB_raw,
+        manoeuvres_tai_ns=tuple((int(fr.time_tai_ns[a]), int(fr.time_tai_ns[b - 1])) for a, b in man),
+        gnss_check=gnss_check, orbit_frame_sigma_rad=_orbit_frame_sigma(frame_check, fr.r_I, fr.v_I),
+        gnss_recheck=recheck, gnss_dropped_late=n_late,
+        attitude_sigma_rad=_attitude_sigma(segments, q_BS_arr, fr.time_tai_ns.size) if smoothing else None,
     )
+
+
+def _orbit_frame_sigma(chk: GnssFitCheck, r_I: NDArray, v_I: NDArray) -> NDArray:
+    """(pitch, yaw, roll) error [rad] of the orbital frame from the GNSS fit's error (per axis) e_r, e_v: the
+    radius direction tilts by e_r / r about axes 1 and 2 (roll, pitch), the orbit normal by e_v / v + e_r / r
+    about axes 1 and 3 (roll, yaw); root-sum-square where both act."""
+    tilt = chk.position_error_m / float(np.median(np.linalg.norm(r_I, axis=1)))
+    normal = chk.velocity_error_m_s / float(np.median(np.linalg.norm(v_I, axis=1))) + tilt
+    return np.array([tilt, normal, float(np.hypot(tilt, normal))])
+
+
+def _attitude_sigma(segments: tuple[SmoothingSegment, ...], q_BS: NDArray, n: int) -> NDArray | None:
+    """(pitch, yaw, roll) star-tracker part [rad]: the smoothing residual rms per sensor axis, times
+    sqrt(parameters / samples) of each segment (the error of the fitted curve), pooled over the segments
+    and taken to the body axes through the mounting (body axes 2, 3, 1 ~ pitch, yaw, roll near the
+    orbital orientation). None when no segment was smoothed."""
+    seg = [s for s in segments if s.smoothed]
+    if not seg:
+        return None
+    var_S = np.zeros(3)
+    for s in seg:
+        m = s.stop - s.start
+        p = np.asarray(s.harmonics, dtype=float) + 4.0
+        var_S += m * s.residual_rms_rad ** 2 * np.minimum(p / m, 1.0)
+    var_S /= sum(s.stop - s.start for s in seg)
+    dcm = rotations.quat_to_dcm(q_BS)
+    var_B = (dcm ** 2) @ var_S
+    return np.sqrt(var_B[[1, 2, 0]])
 
 
 def _checked_inputs(
@@ -358,30 +515,85 @@ def _smoothed_q_OS(
     return rotations.quat_multiply(rotations.quat_conjugate(fr.q_GO), q_GS_sm), segments
 
 
+SUMMARY_LIST_MAX = 10
+"""Lists in the summary keep their first entries (the tables have all)."""
+
+
+def gnss_check_summary(c: GnssFitCheck) -> dict[str, Any]:
+    """JSON-able figures of a GNSS fit check."""
+    return {"consistent": c.consistent, "position_sigma_m": c.position_sigma_m,
+            "velocity_sigma_m_s": c.velocity_sigma_m_s, "noise_source": c.noise_source,
+            "rms_ratio": {"position": c.rms_ratio[0], "velocity": c.rms_ratio[1]}, "ratio_max": GNSS_RMS_RATIO_MAX,
+            "chi2": c.chi2, "dof": c.dof, "p_value": c.p_value, "n_late_tags": int(c.late_tags.sum()),
+            "late_tag_offset_s": c.late_offset_s, "inertial_velocity": c.inertial_velocity, "cause": c.cause,
+            "position_error_m": c.position_error_m, "velocity_error_m_s": c.velocity_error_m_s}
+
+
 def summary_of(result: OrbitalAttitude) -> dict[str, Any]:
-    """JSON-able figures of a result besides the angle statistics: GNSS fit, smoothing, coverage."""
+    """JSON-able figures of a result besides the angle statistics: GNSS fit, smoothing, coverage (lists cut to
+    their first SUMMARY_LIST_MAX entries with their counts; :func:`segment_table` has every segment)."""
     arcsec = ARCSEC_PER_RAD
     seg = [s for s in result.segments if s.smoothed]
     w = np.array([s.stop - s.start for s in seg], dtype=float)
     resid = (np.sqrt(np.sum(w[:, None] * np.stack([s.residual_rms_rad for s in seg]) ** 2, axis=0) / np.sum(w))
              * arcsec).tolist() if seg else None
-    return {
+    names = ("pitch", "yaw", "roll")
+    frame_sig = result.orbit_frame_sigma_rad
+    att_sig = result.attitude_sigma_rad
+    out: dict[str, Any] = {
         "n_samples": int(result.time_tai_ns.size),
         "n_dropped_outside_gnss": int(result.dropped_tai_ns.size),
+        "euler_sequence": result.euler_sequence,
+        "euler_sequence_description": EULER_SEQUENCES[result.euler_sequence],
         "gnss_fit": {
             "method": result.gnss.method,
             "n_samples": result.gnss.n_samples,
             "n_arcs": len(result.gnss.arcs),
             "position_residual_rms_m": result.gnss.position_rms_m.tolist(),
             "velocity_residual_rms_m_s": result.gnss.velocity_rms_m_s.tolist(),
-            "degree": [a.degree for a in result.gnss.arcs] if result.gnss.method == "chebyshev" else None,
-            "harmonics": [list(a.harmonics) for a in result.gnss.arcs] if result.gnss.method == "sine" else None,
+            "degree": [a.degree for a in result.gnss.arcs][:SUMMARY_LIST_MAX] if result.gnss.method == "chebyshev"
+            else None,
+            "harmonics": [list(a.harmonics) for a in result.gnss.arcs][:SUMMARY_LIST_MAX]
+            if result.gnss.method == "sine" else None,
+            "check": None if result.gnss_check is None else gnss_check_summary(result.gnss_check),
+            "n_dropped_late_tags": result.gnss_dropped_late,
+            "check_after_dropping": None if result.gnss_recheck is None else gnss_check_summary(result.gnss_recheck),
         },
+        "orbit_frame_sigma_arcsec": None if frame_sig is None else
+        {n: float(x * arcsec) for n, x in zip(names, frame_sig, strict=True)},
+        "angle_sigma_arcsec": None if frame_sig is None else
+        {n: float(np.hypot(x, 0.0 if att_sig is None else att_sig[i]) * arcsec)
+         for i, (n, x) in enumerate(zip(names, frame_sig, strict=True))},
+        "angle_sigma_note": ("orbit-frame error from the GNSS fit combined with the smoothed star-tracker error"
+                             if att_sig is not None else "orbit-frame error from the GNSS fit only (no smoothing: "
+                             "add the star-tracker noise of each sample)"),
+        "manoeuvres": {"n": len(result.manoeuvres_tai_ns), "segmented": bool(result.manoeuvres_tai_ns),
+                       "intervals_tai_ns": [list(m) for m in result.manoeuvres_tai_ns][:SUMMARY_LIST_MAX]},
+        "n_smoothing_segments": len(result.segments),
         "smoothing_segments": [{"start_tai_ns": int(result.time_tai_ns[s.start]),
                                 "end_tai_ns": int(result.time_tai_ns[s.stop - 1]),
                                 "n_samples": s.stop - s.start, "harmonics": list(s.harmonics),
                                 "residual_rms_arcsec": (s.residual_rms_rad * arcsec).tolist()}
-                               for s in result.segments],
+                               for s in result.segments[:SUMMARY_LIST_MAX]],
         "smoothing_residual_rms_arcsec": resid,
-        "ascending_nodes_tai_ns": [int(x) for x in result.ascending_nodes_tai_ns],
+        "n_ascending_nodes": int(result.ascending_nodes_tai_ns.size),
+        "ascending_nodes_tai_ns": [int(x) for x in result.ascending_nodes_tai_ns[:SUMMARY_LIST_MAX]],
     }
+    return out
+
+
+def segment_table(result: OrbitalAttitude) -> dict[str, NDArray]:
+    """Every smoothing segment: start/end times, samples, harmonics and residual rms per sensor axis."""
+    segs = result.segments
+    t = result.time_tai_ns
+    res = np.array([s.residual_rms_rad for s in segs]).reshape(-1, 3) * ARCSEC_PER_RAD
+    h = np.array([s.harmonics for s in segs], dtype=np.int64).reshape(-1, 3)
+    man = np.zeros(len(segs), dtype=bool)
+    for a, b in result.manoeuvres_tai_ns:
+        man |= np.array([(t[s.start] >= a) & (t[s.stop - 1] <= b) for s in segs], dtype=bool)
+    return {"time_tai_ns": np.array([t[s.start] for s in segs], dtype=np.int64),
+            "end_tai_ns": np.array([t[s.stop - 1] for s in segs], dtype=np.int64),
+            "n_samples": np.array([s.stop - s.start for s in segs], dtype=np.int64),
+            "in_manoeuvre": man,
+            **{f"harmonics_z{i + 1}": h[:, i] for i in range(3)},
+            **{f"residual_rms_x{i + 1}_arcsec": res[:, i] for i in range(3)}}

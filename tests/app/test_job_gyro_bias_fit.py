@@ -197,7 +197,7 @@ def test_bad_inputs_are_task_errors() -> None:
         JOB.run(inputs(sc, {"star_tracker": sc.streams["star_tracker"]}), JOB.params(), no_progress)
     g = {k: np.delete(v, np.s_[3000:3100]) for k, v in sc.streams["gyro"].items()}  # a 10 s gap
     with pytest.raises(TaskError, match=r"gyro gap of 10.1 s exceeds max_gyro_gap_s = 5.0 s"):
-        JOB.run(inputs(sc, {**sc.streams, "gyro": g}), JOB.params(), no_progress)
+        JOB.run(inputs(sc, {**sc.streams, "gyro": g}), JOB.params(split_at_gyro_gaps=False), no_progress)
     result = JOB.run(inputs(sc, {**sc.streams, "gyro": g}), JOB.params(max_gyro_gap_s=20.0, subintervals=[]),
                      no_progress)
     assert any("gyro gaps" in n for n in result.notes)

@@ -14,6 +14,9 @@ from processing.screening.coverage import find_gaps
 from processing.tasks import Progress, TaskInputs, TaskResult
 from processing.units import NS_PER_S
 
+GAPS_IN_SUMMARY = 10
+"""Gaps listed per stream in the summary (the ``gaps`` table has every gap): GET /jobs/{id} stays small."""
+
 
 class Params(BaseModel):
     model_config = ConfigDict(extra="forbid")
@@ -46,9 +49,12 @@ def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
                     period_s=gaps.nominal_period_ns / NS_PER_S, n_gaps=gaps.count,
                     gap_total_s=float(gaps.duration_ns.sum()) / NS_PER_S, missing_samples=int(gaps.missing.sum()),
                     completeness=float(t.size / expected),
+                    longest_gap_s=float(gaps.duration_ns.max()) / NS_PER_S if gaps.count else 0.0,
                     gaps=[{"before_tai_ns": int(b), "after_tai_ns": int(a), "duration_s": (a - b) / NS_PER_S,
                            "missing": int(m)}
-                          for b, a, m in zip(gaps.before_tai_ns, gaps.after_tai_ns, gaps.missing, strict=True)],
+                          for b, a, m in zip(gaps.before_tai_ns[:GAPS_IN_SUMMARY], gaps.after_tai_ns[:GAPS_IN_SUMMARY],
+                                             gaps.missing[:GAPS_IN_SUMMARY], strict=True)],
+                    gaps_listed=min(gaps.count, GAPS_IN_SUMMARY),
                 )
                 gap_rows["stream"] += [name] * gaps.count
                 gap_rows["sensor"] += [sensor] * gaps.count
@@ -58,12 +64,13 @@ def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
                 gap_rows["missing"] += gaps.missing.tolist()
             else:
                 entry.update(period_s=None, n_gaps=0, gap_total_s=0.0, missing_samples=0, completeness=None,
-                             gaps=[])
+                             longest_gap_s=0.0, gaps=[], gaps_listed=0)
             streams.append(entry)
     summary = {
         "window_start_tai_ns": inputs.start_tai_ns, "window_end_tai_ns": inputs.end_tai_ns,
         "gap_factor": params.gap_factor, "n_streams": len(names),
         "n_gaps": int(sum(s["n_gaps"] for s in streams)), "streams": streams,
+        "gaps_in_summary": f"the first {GAPS_IN_SUMMARY} gaps per stream; every gap is in the gaps table",
     }
     cov = {"stream": [s["stream"] for s in streams], "sensor": [s["sensor"] for s in streams],
            "n_samples": [s["n_samples"] for s in streams], "period_s": [s["period_s"] for s in streams],
@@ -84,12 +91,19 @@ def figures(result: TaskResult, params: Params) -> dict[str, Figure]:
     fig = Figure(figsize=(9, 0.5 + 0.45 * max(1, len(streams))), label="Telemetry coverage and gaps")
     ax = fig.add_subplot()
     t0 = result.summary["window_start_tai_ns"]
+    gaps = result.tables.get("gaps", {})
+    g_stream = np.asarray(gaps.get("stream", []), dtype=object).astype(str)
+    g_sensor = np.asarray(gaps.get("sensor", []), dtype=object).astype(str)
+    g_start = np.asarray(gaps.get("time_tai_ns", []), dtype=np.int64)
+    g_dur = np.asarray(gaps.get("duration_s", []), dtype=float)
     for i, s in enumerate(streams):
         span = ((s["first_tai_ns"] - t0) / NS_PER_S, (s["last_tai_ns"] - s["first_tai_ns"]) / NS_PER_S)
         ax.broken_barh([span], (i - 0.3, 0.6),
                        color="tab:green")
-        for g in s["gaps"]:
-            ax.broken_barh([((g["before_tai_ns"] - t0) / NS_PER_S, g["duration_s"])], (i - 0.3, 0.6), color="tab:red")
+        sel = (g_stream == s["stream"]) & (g_sensor == s["sensor"])
+        if np.any(sel):
+            ax.broken_barh(list(zip(((g_start[sel] - t0) / NS_PER_S).tolist(), g_dur[sel].tolist(), strict=True)),
+                           (i - 0.3, 0.6), color="tab:red")
     ax.set_yticks(range(len(streams)), [f"{s['stream']} / {s['sensor']}" for s in streams])
     ax.set_xlabel("time since window start [s]")
     ax.set_title("Coverage (green) and gaps (red)")

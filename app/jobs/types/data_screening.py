@@ -18,7 +18,7 @@ from app.jobs.registry import JobType
 from app.reports.headline import Answer
 from processing.screening.criteria import ScreeningParams, screen
 from processing.screening.flags import flags_table
-from processing.tasks import Progress, TaskError, TaskInputs, TaskResult
+from processing.tasks import Progress, ResultWarning, TaskError, TaskInputs, TaskResult
 from processing.units import NS_PER_S
 
 SCREENABLE = ("gnss", "magnetometer", "panel_currents", "gnss_visibility", "star_tracker", "gyro",
@@ -56,6 +56,9 @@ class Params(BaseModel):
     time_grid_tolerance: float = Field(0.25, gt=0, lt=0.5, description="off-grid tolerance (fraction of period)")
     max_rate_deg_s: float = Field(5.7, gt=0, description="star tracker without gyro: largest plausible rate")
     star_tracker_error_arcsec: float = Field(10.0, gt=0, description="star-tracker noise for quaternion jumps")
+    k_time_tag: float = Field(6.0, ge=0, description="GNSS time_tag: a time shift beyond k x dr/|v| (0: off)")
+    transient_consistency: bool = Field(
+        True, description="a gyro spike whose angle the star tracker sees too is a real transient, not rejected")
 
 
 def _screening_params(p: Params) -> ScreeningParams:
@@ -69,6 +72,7 @@ def _screening_params(p: Params) -> ScreeningParams:
         stuck_min_run=p.stuck_min_run, time_grid_tolerance=p.time_grid_tolerance,
         max_rate_rad_s=float(np.deg2rad(p.max_rate_deg_s)),
         star_tracker_error_rad=float(np.deg2rad(p.star_tracker_error_arcsec / 3600.0)),
+        k_time_tag=p.k_time_tag, transient_consistency=p.transient_consistency,
     )
 
 
@@ -107,7 +111,9 @@ def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
         "energy_model": params.energy_model, "energy_reference": energy_reference,
         "navigation_data": None if nav_ref is None else nav_ref.name,
         "screened_streams": list(result.n_rows),
+        "findings": result.findings,
     }
+    warnings = _warnings(result.findings)
     tables = {"flags": flags_table(result, inputs.streams)}
     stat_rows: dict[str, list[Any]] = {k: [] for k in ("time_tai_ns", "stream", "criterion", "statistic",
                                                         "threshold", "flagged")}
@@ -128,7 +134,23 @@ def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
     if stat_rows["stream"]:
         tables["statistics"] = {k: np.concatenate(v) for k, v in stat_rows.items()}
     progress(0.9, "done")
-    return TaskResult(summary=summary, tables=tables, notes=notes)
+    return TaskResult(summary=summary, tables=tables, notes=notes, warnings=warnings)
+
+
+def _warnings(findings: dict[str, Any]) -> list[ResultWarning]:
+    """GNSS states whose tags are off by a time shift (``time_offset``, with the estimated offset)."""
+    out = []
+    for f in findings.get("gnss_time_tags", []):
+        tau = f["offset_s_median"]
+        out.append(ResultWarning(
+            "time_offset",
+            f"{f['n_states']} GNSS states in {f['n_runs']} runs are time-tagged {abs(tau):.3g} s "
+            f"{'late' if tau > 0 else 'early'} (median; {f['offset_s_min']:.3g} to {f['offset_s_max']:.3g} s): their "
+            "positions and velocities are those of the orbit {:.3g} s {}; they are rejected by the time_tag "
+            "criterion (not their neighbours): correct the receiver's time tags at the source".format(
+                abs(tau), "earlier" if tau > 0 else "later"),
+            {"stream": "gnss", **f}))
+    return out
 
 
 def _rejected_by(reasons: np.ndarray, criterion: str) -> np.ndarray:

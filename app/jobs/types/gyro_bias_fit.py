@@ -86,6 +86,10 @@ class Params(BaseModel):
         None, description="Gyro angle random walk per gyro axis, rad/sqrt(s); None: estimated from the rates."
     )
     max_gyro_gap_s: PositiveFloat = Field(5.0, description="Longest gyro gap bridged by interpolation.")
+    split_at_gyro_gaps: bool = Field(
+        True, description="At longer gyro gaps split the arc and fit each segment on its own; report the segments "
+        "and their combined (inverse-variance) offsets. False: such a gap is an error.")
+    min_segment_s: PositiveFloat = Field(60.0, description="Segments shorter than this (between gaps) are skipped.")
     max_iterations: int = Field(20, ge=1, le=200)
     fit_time_offset: bool = Field(
         False,
@@ -150,7 +154,7 @@ def _gyro(inputs: TaskInputs, params: Params, notes: list[str]) -> tuple[NDArray
         if longest > params.max_gyro_gap_s:
             raise TaskError(
                 f"gyro gap of {longest:.3g} s exceeds max_gyro_gap_s = {params.max_gyro_gap_s} s; "
-                "split the window at the gap"
+                "split the window at the gap (split_at_gyro_gaps does it)"
             )
         notes.append(f"{int(np.sum(gaps))} gyro gaps (longest {longest:.3g} s) bridged by linear interpolation")
     return t, w
@@ -350,6 +354,132 @@ def _fit(win: _Window, params: Params, w_fit: NDArray[np.float64], arw: NDArray[
 
 
 def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
+    """Fit gyro offsets and the initial attitude to star-tracker quaternions (003 §2.1-2.4); with gyro gaps
+    beyond max_gyro_gap_s and split_at_gyro_gaps, per segment and combined (:func:`_run_segments`)."""
+    segments = _gyro_segments(inputs, params) if params.split_at_gyro_gaps else []
+    if len(segments) > 1:
+        return _run_segments(inputs, params, progress, segments)
+    return _run_one(inputs, params, progress)
+
+
+def _gyro_segments(inputs: TaskInputs, params: Params) -> list[tuple[int, int]]:
+    """[first, last] gyro times (tai_ns) of the runs between gyro gaps longer than max_gyro_gap_s (empty when
+    there is no such gap or the gyro cannot be read: the single fit then reports the problem)."""
+    try:
+        names = inputs.sensors("gyro")
+        if len(names) != 1:
+            return []
+        t = np.unique(inputs.gyro().time_tai_ns)
+    except TaskError:
+        return []
+    if t.size < 2:
+        return []
+    cut = np.flatnonzero(np.diff(t) > params.max_gyro_gap_s * NS_PER_S)
+    if cut.size == 0:
+        return []
+    starts = np.concatenate([[0], cut + 1])
+    ends = np.concatenate([cut, [t.size - 1]])
+    return [(int(t[a]), int(t[b])) for a, b in zip(starts, ends, strict=True)]
+
+
+def _restricted(inputs: TaskInputs, start_ns: int, end_ns: int) -> TaskInputs:
+    streams = {}
+    for name, cols in inputs.streams.items():
+        tt = np.asarray(cols["time_tai_ns"], dtype=np.int64)
+        m = (tt >= start_ns) & (tt <= end_ns)
+        streams[name] = {k: np.asarray(v)[m] for k, v in cols.items()}
+    return replace(inputs, streams=streams, start_tai_ns=start_ns, end_tai_ns=end_ns)
+
+
+def _run_segments(inputs: TaskInputs, params: Params, progress: Progress,
+                  segments: list[tuple[int, int]]) -> TaskResult:
+    """The arc split at its gyro gaps: each segment fitted on its own (the whole job, sub-intervals included), the
+    offsets combined by inverse variance per body axis, their agreement tested (chi-square over the segments;
+    beyond p = 0.01 the combined sigma is inflated by sqrt(chi2 / dof) and ``bias_not_constant`` says so). The
+    summary is that of the longest segment (attitude, residuals, tables, figures) with the combined offsets in
+    gyro_bias_rad_s / gyro_bias_sigma_rad_s, ``segments`` (each one's offsets) and ``combined``."""
+    from processing.estimation.chi2 import chi2_sf
+
+    notes: list[str] = []
+    results: list[tuple[tuple[int, int], TaskResult]] = []
+    one = params.model_copy(update={"split_at_gyro_gaps": False})
+    for k, (a, b) in enumerate(segments):
+        if (b - a) / NS_PER_S < params.min_segment_s:
+            notes.append(f"gyro segment {k + 1} ({_iso(a)} to {_iso(b)}, {(b - a) / NS_PER_S:.3g} s) is shorter than "
+                         f"min_segment_s = {params.min_segment_s:g} s: skipped")
+            continue
+        def seg_progress(f: float, st: str, k: int = k) -> None:
+            progress((k + f) / len(segments), f"segment {k + 1}: {st}")
+
+        try:
+            res = _run_one(_restricted(inputs, a, b), one, seg_progress)
+        except TaskError as exc:
+            notes.append(f"gyro segment {k + 1} ({_iso(a)} to {_iso(b)}) not fitted: {exc}")
+            continue
+        results.append(((a, b), res))
+    if not results:
+        raise TaskError(f"the gyro gaps beyond max_gyro_gap_s = {params.max_gyro_gap_s:g} s leave no segment that "
+                        "can be fitted: " + "; ".join(notes))
+    bias = np.array([r.summary["gyro_bias_rad_s"] for _, r in results], dtype=float)
+    sig = np.array([r.summary["gyro_bias_sigma_rad_s"] for _, r in results], dtype=float)
+    w = 1.0 / sig ** 2
+    comb = np.sum(w * bias, axis=0) / np.sum(w, axis=0)
+    comb_sig = 1.0 / np.sqrt(np.sum(w, axis=0))
+    dof = 3 * (len(results) - 1)
+    chi2 = float(np.sum((bias - comb) ** 2 * w))
+    p = float(chi2_sf(chi2, dof)) if dof else 1.0
+    consistent = p >= 0.01
+    inflation = 1.0 if consistent else float(np.sqrt(chi2 / dof))
+    longest = max(range(len(results)), key=lambda i: results[i][0][1] - results[i][0][0])
+    base = results[longest][1]
+    rows = [{"index": i, "start": _iso(a), "end": _iso(e), "start_tai_ns": a, "end_tai_ns": e,
+             "duration_s": (e - a) / NS_PER_S, "n_star_tracker_samples": r.summary["n_star_tracker_samples"],
+             "n_gyro_samples": r.summary["n_gyro_samples"], "gyro_bias_rad_s": r.summary["gyro_bias_rad_s"],
+             "gyro_bias_sigma_rad_s": r.summary["gyro_bias_sigma_rad_s"], "converged": r.summary["converged"],
+             "residual_rms_arcsec": r.summary["residual_rms_arcsec"]} for i, ((a, e), r) in enumerate(results)]
+    summary = dict(base.summary)
+    summary.update(
+        gyro_bias_rad_s=_floats(comb), gyro_bias_sigma_rad_s=_floats(comb_sig * inflation),
+        delta_body_arcsec_s=_floats(-comb * ARCSEC_PER_RAD),
+        delta_body_sigma_arcsec_s=_floats(comb_sig * inflation * ARCSEC_PER_RAD),
+        segments=rows,
+        combined={"n_segments": len(results), "chi2": chi2, "dof": dof, "p_value": p, "consistent": consistent,
+                  "inflation": inflation, "gyro_bias_rad_s": _floats(comb),
+                  "gyro_bias_sigma_rad_s": _floats(comb_sig * inflation),
+                  "detail_segment": longest,
+                  "note": "gyro_bias_* are combined over the segments; the other figures (attitude, residuals, "
+                          "sub-intervals, tables) are those of the longest segment, detail_segment"},
+        converged=all(r.summary["converged"] for _, r in results),
+    )
+    warnings: list[ResultWarning] = []
+    seen: set[tuple[str, str]] = set()
+    for i, (_, r) in enumerate(results):
+        for wng in r.warnings:
+            key = (wng.code, wng.message)
+            if key not in seen:
+                seen.add(key)
+                warnings.append(ResultWarning(wng.code, f"segment {i}: {wng.message}", {**wng.evidence, "segment": i}))
+    if not consistent:
+        warnings.append(ResultWarning(
+            "bias_not_constant",
+            f"the gyro offsets of the {len(results)} segments between the gyro gaps differ beyond their sigmas "
+            f"(chi² {chi2:.1f} with {dof} degrees of freedom, p = {p:.2g}): the combined sigma is inflated by "
+            f"{inflation:.2f}; see the segments' own offsets",
+            {"chi2": chi2, "dof": dof, "p_value": p, "inflation": inflation}))
+    notes.insert(0, f"the window was split at {len(segments) - 1} gyro gap(s) longer than max_gyro_gap_s = "
+                    f"{params.max_gyro_gap_s:g} s into {len(segments)} segments; {len(results)} fitted, offsets "
+                    "combined by inverse variance")
+    tables = dict(base.tables)
+    tables["segments"] = {
+        "time_tai_ns": np.array([r["start_tai_ns"] for r in rows], dtype=np.int64),
+        "end_tai_ns": np.array([r["end_tai_ns"] for r in rows], dtype=np.int64),
+        **{f"gyro_bias{i + 1}_rad_s": bias[:, i] for i in range(3)},
+        **{f"gyro_bias{i + 1}_sigma_rad_s": sig[:, i] for i in range(3)}}
+    return TaskResult(summary=summary, tables=tables, notes=notes + list(base.notes), files=dict(base.files),
+                      warnings=warnings)
+
+
+def _run_one(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
     """Fit gyro offsets and the initial attitude to star-tracker quaternions (003 §2.1-2.4)."""
     notes: list[str] = []
     progress(0.0, "loading")

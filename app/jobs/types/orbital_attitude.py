@@ -22,8 +22,14 @@ from processing.formats.ccsds_adm import aem_segment, write_aem
 from processing.frames.earth_orientation import EarthOrientation, FrameInputError
 from processing.frames.eop import EopCoverageError, interpolate_eop
 from processing.orbits.gnss_orbit import GnssFitError
-from processing.star_tracker.orbital_attitude import OrbitalAttitudeError, orbital_attitude, summary_of
-from processing.tasks import Progress, TaskError, TaskInputs, TaskResult
+from processing.star_tracker.orbital_attitude import (
+    EULER_SEQUENCES,
+    OrbitalAttitudeError,
+    orbital_attitude,
+    segment_table,
+    summary_of,
+)
+from processing.tasks import Progress, ResultWarning, TaskError, TaskInputs, TaskResult
 from processing.units import NS_PER_S
 
 EOP_KIND = "eop_finals2000a"
@@ -50,6 +56,19 @@ class Params(BaseModel):
                                  "sine series")
     segment_max_s: float = Field(1200.0, gt=60.0, le=7200.0, description="longest smoothing segment [s]")
     max_gap_s: float = Field(60.0, gt=0.0, le=3600.0, description="a longer star-tracker gap splits segments")
+    euler_sequence: Literal["231", "321"] = Field(
+        "231", description="Euler sequence of the reported angles: 231 = pitch, yaw, roll of 003 §1.6; 321 = yaw, "
+                           "pitch, roll (the common LVLH convention)")
+    segment_at_manoeuvres: bool = Field(
+        True, description="detect manoeuvres (rate relative to the orbital frame beyond the data's normal motion) "
+                          "and start and end smoothing segments there")
+    gnss_position_sigma_m: float | None = Field(
+        None, gt=0, description="GNSS receiver position noise (1 sigma per axis); default: estimated from the data")
+    gnss_velocity_sigma_m_s: float | None = Field(
+        None, gt=0, description="GNSS receiver velocity noise (1 sigma per axis); default: estimated from the data")
+    drop_late_gnss_tags: bool = Field(
+        True, description="when the GNSS fit is inconsistent and some states are a pure time shift (late tags), "
+                          "fit the orbit again without them")
     write_aem: bool = Field(True, description="write the body attitude as a CCSDS AEM 2.0 file")
     aem_object_name: str = Field("UNKNOWN", max_length=100, pattern=r"^[^\n\r=]*$")
     aem_object_id: str = Field("UNKNOWN", max_length=100, pattern=r"^[^\n\r=]*$")
@@ -103,7 +122,10 @@ def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
             inertial_frame=params.inertial_frame, orbital_frame=params.orbital_frame, smoothing=params.smoothing,
             smoothing_frame=params.smoothing_frame, harmonics=params.harmonics, trend_degree=params.trend_degree,
             eop=eop, gnss_method=params.gnss_smoother, segment_max_s=params.segment_max_s,
-            max_gap_s=params.max_gap_s, progress=lambda f, s: progress(0.05 + 0.8 * f, s))
+            max_gap_s=params.max_gap_s, euler_sequence=params.euler_sequence,
+            segment_at_manoeuvres=params.segment_at_manoeuvres, gnss_position_sigma_m=params.gnss_position_sigma_m,
+            gnss_velocity_sigma_m_s=params.gnss_velocity_sigma_m_s, drop_late_gnss_tags=params.drop_late_gnss_tags,
+            progress=lambda f, s: progress(0.05 + 0.8 * f, s))
     except (OrbitalAttitudeError, GnssFitError, FrameInputError) as exc:
         raise TaskError(str(exc)) from exc
     if res.dropped_tai_ns.size:
@@ -122,6 +144,7 @@ def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
         "smoothing_frame": params.smoothing_frame if params.smoothing else None,
         "trend_degree": params.trend_degree if params.smoothing else None,
         "raw": raw,
+        "angles_by_sequence": {seq: res.angle_statistics_deg(sequence=seq) for seq in EULER_SEQUENCES},
         "first_tai_ns": int(res.time_tai_ns[0]),
         "last_tai_ns": int(res.time_tai_ns[-1]),
         **summary_of(res),
@@ -135,7 +158,12 @@ def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
             "pitch_raw_deg": deg(res.pitch_raw_rad), "yaw_raw_deg": deg(res.yaw_raw_rad),
             "roll_raw_deg": deg(res.roll_raw_rad),
             **{f"q_GB_{i}": res.q_GB[:, i] for i in range(4)}},
+        "smoothing_segments": segment_table(res),
     }
+    warnings = _warnings(res, summary)
+    if res.manoeuvres_tai_ns:
+        notes.append(f"{len(res.manoeuvres_tai_ns)} manoeuvre(s) found; smoothing segments start and end there"
+                     if params.smoothing else f"{len(res.manoeuvres_tai_ns)} manoeuvre(s) found")
     files: dict[str, tuple[bytes, str]] = {}
     if params.write_aem:
         progress(0.88, "writing the CCSDS AEM")
@@ -150,7 +178,32 @@ def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
                           time_system="UTC", comments=comments)
         text = write_aem([seg], originator="ATTITUDE-SERVICE", creation_date=dt.datetime.now(dt.UTC))
         files[AEM_FILE] = (text.encode(), "text/plain")
-    return TaskResult(summary=summary, tables=tables, notes=notes, files=files)
+    return TaskResult(summary=summary, tables=tables, notes=notes, files=files, warnings=warnings)
+
+
+def _warnings(res: Any, summary: dict[str, Any]) -> list[ResultWarning]:
+    """The GNSS fit judged against the receiver noise: ``time_offset`` when late tags explain it (with the
+    offset), ``implausible_input`` otherwise (naming what was tried), each with the attitude error it causes."""
+    chk = res.gnss_check
+    if chk is None or chk.consistent:
+        return []
+    sig = summary.get("orbit_frame_sigma_arcsec") or {}
+    ev = {**summary["gnss_fit"]["check"], "orbit_frame_sigma_arcsec": sig,
+          "n_dropped_late_tags": res.gnss_dropped_late}
+    ratio = max(chk.rms_ratio)
+    head = (f"the GNSS orbit fit's residuals are {ratio:.3g} x the receiver noise ({chk.noise_source}: "
+            f"{chk.position_sigma_m:.3g} m, {chk.velocity_sigma_m_s:.3g} m/s); likely cause: {chk.cause}")
+    if res.gnss_dropped_late:
+        after = res.gnss_recheck
+        tail = (f"; the orbit was fitted again without the {res.gnss_dropped_late} late states"
+                + ("" if after is None or after.consistent else
+                   f", still {max(after.rms_ratio):.3g} x the noise") +
+                f"; the orbital frame's error is {max(sig.values(), default=0.0):.3g} arcsec (in angle_sigma_arcsec)")
+    else:
+        tail = (f"; the angles carry an orbital-frame error up to {max(sig.values(), default=0.0):.3g} arcsec "
+                "(angle_sigma_arcsec): correct the GNSS data before trusting them")
+    code = "time_offset" if chk.late_offset_s is not None else "implausible_input"
+    return [ResultWarning(code, head + tail, ev)]
 
 
 def _unwrap_deg(a: np.ndarray) -> np.ndarray:
@@ -175,7 +228,7 @@ def figures(result: TaskResult, params: Params) -> dict[str, Figure]:
         ax.grid(alpha=0.3)
     axes[0].legend(loc="best", fontsize=8)
     axes[-1].set_xlabel("time since the first sample [min]")
-    fig.suptitle(f"Attitude relative to the {params.orbital_frame} frame")
+    fig.suptitle(f"Attitude relative to the {params.orbital_frame} frame, Euler sequence {params.euler_sequence}")
 
     fig2 = Figure(figsize=(9, 7), label="Virtual orbit: angles against time since the ascending node (003 fig. 12)")
     axes2 = fig2.subplots(3, 1, sharex=True)
@@ -202,6 +255,7 @@ JOB = JobType(
                 "IERS finals2000A data set or zero; statistics, time series, virtual orbit and a CCSDS AEM of the "
                 "body attitude.",
     headline=tuple(Answer(f"{a}_deg.mean", f"Orbital {a}, mean over the window", sigma=f"{a}_deg.std",
-                          sigma_label="std", frame="body B in the orbital frame O ({orbital_frame})",
+                          sigma_label="std",
+                          frame="body B in the orbital frame O ({orbital_frame}), Euler sequence {euler_sequence}",
                           judged_by=(f"{a}_deg.min", f"{a}_deg.max")) for a in ("pitch", "yaw", "roll")),
 )

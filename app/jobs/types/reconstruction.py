@@ -9,7 +9,9 @@ What flows between stages:
 
 - **screened data**: when data_screening succeeded, the samples its ``flags`` table rejects are removed
   from the inputs of every later stage, by the runner's own mechanism
-  (:func:`processing.screening.flags.filter_streams`);
+  (:func:`processing.screening.flags.filter_streams`), except rejected gyro rates, which are bridged by
+  interpolating their accepted neighbours (``gyro_rejections="bridge"``, holes up to ``max_bridge_s``) so
+  that rejections do not become gaps that break the gyro fits (counted as ``gyro_bridged``);
 - **calibrations**: when gyro_bias_fit succeeded, its body-frame bias (``w_meas = w_true + b``) is
   removed from the gyro rates given to orbital_attitude (``w_G - R(q_BG)^T b_B``); alignment_calibration
   gets the screened but uncorrected rates, since it estimates the drift itself. The values used are
@@ -18,7 +20,7 @@ What flows between stages:
 Progress is weighted by the stages' typical cost; a stage that fails with a task error ends the
 pipeline (or, with ``continue_on_error``, is recorded and the next stage runs); any other exception is
 an internal error and goes to the runner. The summary has every
-stage's own summary under ``stages.<name>``; tables, files and figures keep their names, prefixed with
+stage's own summary under ``stages.<name>.summary``; tables, files and figures keep their names, prefixed with
 the stage (``gyro_bias_fit__residuals.csv``), so the standard job report is the combined report.
 """
 
@@ -26,7 +28,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from matplotlib.figure import Figure
@@ -39,6 +41,7 @@ from processing.screening.flags import filter_streams
 from processing.spacecraft import Spacecraft
 from processing.streams import STREAMS
 from processing.tasks import Progress, ResultWarning, TaskError, TaskInputs, TaskResult
+from processing.units import NS_PER_S
 
 STAGES: tuple[tuple[str, float], ...] = (  # (job type, relative cost for the progress bar)
     ("data_screening", 1.0),
@@ -62,6 +65,11 @@ class Params(BaseModel):
     calibrate_alignment: bool | None = Field(None, description="run alignment_calibration; default: when the "
                                                                "configuration has a gyro and a star tracker")
     apply_screening: bool = Field(True, description="drop the samples data_screening rejects from later stages")
+    gyro_rejections: Literal["bridge", "drop"] = Field(
+        "bridge", description="rejected gyro rates: bridge = replaced by linear interpolation of the accepted "
+                              "neighbours where the hole is at most max_bridge_s (dropping them would open gaps "
+                              "in the integrated rates that break the gyro fits), drop = removed like the others")
+    max_bridge_s: float = Field(5.0, gt=0.0, le=60.0, description="longest hole of rejected gyro samples bridged")
     apply_gyro_bias: bool = Field(True, description="remove the fitted gyro bias from the rates of "
                                                     "orbital_attitude")
     continue_on_error: bool = Field(False, description="record a failing stage and go on with the next")
@@ -125,19 +133,64 @@ def _stage_inputs(inputs: TaskInputs, streams: Mapping[str, Mapping[str, NDArray
 
 
 def apply_screening(streams: Mapping[str, Mapping[str, NDArray[Any]]],
-                    result: TaskResult) -> tuple[dict[str, dict[str, NDArray[Any]]], dict[str, int]]:
+                    result: TaskResult, *, bridge_gyro_s: float | None = None
+                    ) -> tuple[dict[str, dict[str, NDArray[Any]]], dict[str, int]]:
     """Remove the samples data_screening's ``flags`` table rejects, with the runner's mechanism
     (:func:`processing.screening.flags.filter_streams`: rows matched by stream, sensor, key and time).
 
-    Returns the screened streams and the removed samples per stream (streams without removals left
-    out); without a ``flags`` table nothing is removed."""
+    bridge_gyro_s: rejected gyro rates are not removed but replaced by the linear interpolation of the
+    accepted neighbours (of the same sensor) where those are at most this far apart, so that rejections do
+    not open gaps in the integrated rates; longer holes are removed (a real gap). Returns the screened
+    streams and the removed samples per stream (streams without removals left out; bridged gyro samples
+    count under ``gyro_bridged``); without a ``flags`` table nothing is removed."""
     flags = result.tables.get("flags")
     if flags is None:
         return {k: dict(v) for k, v in streams.items()}, {}
     screened = filter_streams(streams, flags)
+    bridged = 0
+    if bridge_gyro_s is not None and "gyro" in streams:
+        screened["gyro"], bridged = _bridge_gyro(streams["gyro"], screened.get("gyro"), bridge_gyro_s)
     removed = {n: len(cols["time_tai_ns"]) - (len(screened[n]["time_tai_ns"]) if n in screened else 0)
                for n, cols in streams.items()}
-    return screened, {n: c for n, c in removed.items() if c}
+    out = {n: c for n, c in removed.items() if c}
+    if bridged:
+        out["gyro_bridged"] = bridged
+    return screened, out
+
+
+def _bridge_gyro(raw: Mapping[str, NDArray[Any]], kept: Mapping[str, NDArray[Any]] | None,
+                 max_s: float) -> tuple[dict[str, NDArray[Any]], int]:
+    """The gyro rows with rejected rates interpolated from the accepted ones where the accepted neighbours are
+    at most max_s apart (the others removed); (columns, number bridged)."""
+    t = np.asarray(raw["time_tai_ns"], dtype=np.int64)
+    sensor = np.asarray(raw["sensor"]).astype(str)
+    kt = np.zeros(0, np.int64) if kept is None else np.asarray(kept["time_tai_ns"], dtype=np.int64)
+    ks = np.zeros(0, str) if kept is None else np.asarray(kept["sensor"]).astype(str)
+    keep = np.zeros(t.size, dtype=bool)
+    values = {c: np.asarray(raw[c], dtype=np.float64).copy() for c in ("wx", "wy", "wz")}
+    n_bridged = 0
+    for name in np.unique(sensor):
+        rows = np.flatnonzero(sensor == name)
+        rows = rows[np.argsort(t[rows], kind="stable")]
+        acc_t = np.sort(kt[ks == name])
+        accepted = np.isin(t[rows], acc_t)
+        keep[rows[accepted]] = True
+        rej = rows[~accepted]
+        if rej.size == 0 or acc_t.size < 2:
+            continue
+        i = np.searchsorted(acc_t, t[rej])
+        inside = (i > 0) & (i < acc_t.size)
+        span = acc_t[np.minimum(i, acc_t.size - 1)] - acc_t[np.maximum(i - 1, 0)]
+        ok = inside & (span <= max_s * NS_PER_S)
+        good = rows[accepted]
+        for c in values:
+            values[c][rej[ok]] = np.interp(t[rej[ok]], t[good], values[c][good])
+        keep[rej[ok]] = True
+        n_bridged += int(ok.sum())
+    out = {k: np.asarray(v)[keep] for k, v in raw.items()}
+    for c in values:
+        out[c] = values[c][keep]
+    return out, n_bridged
 
 
 def correct_gyro_bias(gyro: Mapping[str, NDArray[Any]], bias_B: NDArray[np.float64],
@@ -215,7 +268,8 @@ def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
         for file_name, content in result.files.items():
             files[f"{name}{SEPARATOR}{file_name}"] = content
         if name == "data_screening" and params.apply_screening:
-            streams, removed = apply_screening(streams, result)
+            streams, removed = apply_screening(
+                streams, result, bridge_gyro_s=params.max_bridge_s if params.gyro_rejections == "bridge" else None)
             calibrations["screened_out"] = removed
             if not removed:
                 notes.append("data_screening rejected no samples (or its flags were not understood)")
