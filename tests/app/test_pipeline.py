@@ -206,3 +206,21 @@ def test_real_screening_output_is_applied_with_its_own_filter(inputs):
     for name in expected:
         np.testing.assert_array_equal(screened[name]["time_tai_ns"], expected[name]["time_tai_ns"])
         assert removed.get(name, 0) == len(inputs.streams[name]["time_tai_ns"]) - len(expected[name]["time_tai_ns"])
+
+
+def test_alignment_stage_is_skipped_on_an_arc_without_rate_variation(inputs):
+    """Earth pointing (seed 003): a constant rate cannot be told from drift, so the stage says why it did not
+    run instead of spending the pipeline's largest share on null results; an arc with slews passes."""
+    params = reconstruction.Params(stages=["alignment_calibration"], calibrate_alignment=True)
+    if "alignment_calibration" not in registry_module.registry():
+        pytest.skip("alignment_calibration is not registered")
+    result = reconstruction.run(inputs, params, lambda f, s: None)
+    stage = result.summary["stages"]["alignment_calibration"]
+    assert stage["status"] == "skipped" and "hardly varies" in stage["reason"]
+    assert result.summary["stages_run"] == []
+    assert isinstance(reconstruction._alignment_excited(inputs, 0.0), TaskInputs)
+    t = inputs.streams["gyro"]["time_tai_ns"]
+    slews = {**inputs.streams["gyro"], "wx": 0.01 * np.sin(2 * np.pi * (t - t[0]) / 3e11)}
+    moved = TaskInputs(streams={**inputs.streams, "gyro": slews}, spacecraft=inputs.spacecraft,
+                       start_tai_ns=inputs.start_tai_ns, end_tai_ns=inputs.end_tai_ns)
+    assert reconstruction._alignment_excited(moved, 0.01) is moved

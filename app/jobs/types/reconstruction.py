@@ -73,6 +73,11 @@ class Params(BaseModel):
     apply_gyro_bias: bool = Field(True, description="remove the fitted gyro bias from the rates of "
                                                     "orbital_attitude")
     continue_on_error: bool = Field(False, description="record a failing stage and go on with the next")
+    min_alignment_rate_variation_deg_s: float = Field(
+        0.01, ge=0.0, le=10.0, description=(
+            "alignment_calibration runs only when the body rate (60-s means) varies by at least this much (std "
+            "about its mean, on some axis): a constant rate cannot be told from gyro drift, so the arc cannot "
+            "determine a misalignment and no calibration would be stored (0: always run)"))
 
 
 def _available() -> dict[str, JobType]:
@@ -130,6 +135,35 @@ def _stage_inputs(inputs: TaskInputs, streams: Mapping[str, Mapping[str, NDArray
     reference = {k: v for k, v in inputs.reference.items() if k in jt.reference}
     return TaskInputs(streams=present, spacecraft=inputs.spacecraft, start_tai_ns=inputs.start_tai_ns,
                       end_tai_ns=inputs.end_tai_ns, reference=reference)
+
+
+RATE_VARIATION_WINDOW_S = 60.0
+
+
+def _alignment_excited(inputs: TaskInputs, min_variation_deg_s: float) -> TaskInputs | str:
+    """The inputs, or why the arc cannot calibrate the alignment: the std of the 60-s mean gyro rates about
+    their mean, per axis, below min_variation_deg_s on every axis (a constant rate is indistinguishable from
+    drift; 000 needs slews or scans)."""
+    if min_variation_deg_s <= 0 or "gyro" not in inputs.streams:
+        return inputs
+    g = inputs.streams["gyro"]
+    t = np.asarray(g["time_tai_ns"], dtype=np.int64)
+    if t.size < 3:
+        return inputs
+    w = np.stack([np.asarray(g[c], dtype=np.float64) for c in ("wx", "wy", "wz")], axis=1)
+    bins = (t - t[0]) // int(RATE_VARIATION_WINDOW_S * 1e9)
+    _, index, counts = np.unique(bins, return_inverse=True, return_counts=True)
+    means = np.zeros((counts.size, 3))
+    np.add.at(means, index, w)
+    means /= counts[:, None]
+    variation = np.degrees(means.std(axis=0)) if counts.size > 1 else np.zeros(3)
+    if np.all(variation < min_variation_deg_s):
+        return (f"the body rate hardly varies over the arc (std of the {RATE_VARIATION_WINDOW_S:.0f}-s mean gyro "
+                f"rates {', '.join(f'{v:.4f}' for v in variation)} deg/s about x, y, z, all below "
+                f"min_alignment_rate_variation_deg_s = {min_variation_deg_s}): a constant rate cannot be told "
+                "from gyro drift, so no misalignment or calibration would come of it; run alignment_calibration "
+                "on an arc with slews or scans")
+    return inputs
 
 
 def apply_screening(streams: Mapping[str, Mapping[str, NDArray[Any]]],
@@ -242,6 +276,8 @@ def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
         if name in BIAS_CORRECTED_STAGES and raw_gyro_bias_free is not None:
             view = {**streams, "gyro": raw_gyro_bias_free}
         stage_inputs = _stage_inputs(inputs, view, jt)
+        if name == "alignment_calibration" and not isinstance(stage_inputs, str):
+            stage_inputs = _alignment_excited(stage_inputs, params.min_alignment_rate_variation_deg_s)
         if isinstance(stage_inputs, str):
             stages[name] = {"status": "skipped", "reason": stage_inputs}
             notes.append(f"{name} skipped: {stage_inputs}")
