@@ -315,6 +315,9 @@ def test_specification_checks_by_hand():
                                                              "scale_factor_error_max_ppm": 100})
     st = specs.evaluate("star_tracker_accuracy", {"sigma_arcsec": [3.0, 12.0, None]}, s)
     assert [(c.values, c.passed, c.ok) for c in st] == [((3.0, 12.0, None), (True, False, None), False)]
+    # correlated residuals: sigma is a lower bound; under the limit proves nothing, over it still fails
+    (low,) = specs.evaluate("star_tracker_accuracy", {"sigma_arcsec": [3.0, 12.0, 1.0], "residuals_white": False}, s)
+    assert low.passed == (None, False, None) and "lower bound" in low.limit
     bias = 10.0 * math.pi / 180 / 3600  # 10 deg/h in rad/s
     (b,) = specs.evaluate("gyro_bias_fit", {"gyro_bias_rad_s": [bias, -bias, -2.5 * bias]}, s)
     assert b.unit == "deg/h" and b.values == pytest.approx((10.0, -10.0, -25.0)) and b.passed == (True, True, False)
