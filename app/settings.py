@@ -43,6 +43,7 @@ class Settings:
     data_url: str | None = None  # fsspec/pyarrow URL for Parquet and artifacts, e.g. s3://bucket/prefix
     scheduler: bool = True  # run the cron scheduler in this instance
     scheduler_poll_s: float = 1.0
+    min_schedule_period_s: int = 60  # closest allowed ticks of a schedule's cron
 
     @classmethod
     def from_env(cls, env: dict[str, str] | None = None) -> Settings:
@@ -60,6 +61,7 @@ class Settings:
             heartbeat_timeout_s=_int_env(env, "ATTITUDE_JOB_HEARTBEAT_TIMEOUT_S", 60),
             max_upload_rows=_int_env(env, "ATTITUDE_MAX_UPLOAD_ROWS", 20_000_000),
             rate_limit_per_minute=_int_env(env, "ATTITUDE_RATE_LIMIT_PER_MINUTE", 1200),
+            min_schedule_period_s=_int_env(env, "ATTITUDE_MIN_SCHEDULE_PERIOD_S", 60),
             cors_origins=tuple(o.strip() for o in (env.get("ATTITUDE_CORS_ORIGINS") or "").split(",") if o.strip()),
             **_scale_out_env(env),
         )

@@ -54,9 +54,16 @@ class SkipTick(Exception):
     """The tick cannot submit a job; the message is stored with the run."""
 
 
-def check_cron(expr: str) -> str:
-    """Normalise and validate a cron expression (UTC); raises CronError."""
+MIN_PERIOD_S = 60.0  # default floor between ticks (ATTITUDE_MIN_SCHEDULE_PERIOD_S)
+_PERIOD_PROBE_TICKS = 130  # a six-field expression repeats its seconds pattern at least every minute
+
+
+def check_cron(expr: str, min_period_s: float = MIN_PERIOD_S) -> str:
+    """Normalise and validate a cron expression (UTC); raises CronError, also when two ticks come closer
+    than ``min_period_s`` (a six-field ``* * * * * *`` fires every second)."""
     expr = " ".join(expr.split())
+    if len(expr) > 200:
+        raise CronError(f"cron expression of {len(expr)} characters; at most 200")
     if not expr or not croniter.is_valid(expr):
         raise CronError(f"invalid cron expression {expr!r}: expected 5 fields (minute hour day month weekday), "
                         f"6 with seconds last, or @hourly/@daily/@weekly/@monthly/@yearly")
@@ -64,6 +71,13 @@ def check_cron(expr: str) -> str:
         next_tick(expr, utcnow())
     except (CroniterError, ValueError, OverflowError):
         raise CronError(f"cron expression {expr!r} never fires (e.g. a day that no month has)") from None
+    if len(expr.split()) == 6:  # seconds: five fields and @-names never fire more than once a minute
+        it = croniter(expr, utcnow())
+        ticks = [it.get_next(float) for _ in range(_PERIOD_PROBE_TICKS)]
+        gap = min(b - a for a, b in zip(ticks, ticks[1:], strict=False))
+        if gap < min_period_s:
+            raise CronError(f"cron expression {expr!r} fires every {gap:g} s; schedules may fire at most once "
+                            f"every {min_period_s:g} s (ATTITUDE_MIN_SCHEDULE_PERIOD_S)")
     return expr
 
 

@@ -19,12 +19,13 @@ from app.reports.inputs import retracted_by_job
 from app.reports.job_report import brief, report_json
 from app.reports.specs import parse as parse_specs
 from app.services.access import Principal
+from app.services.bounds import check_json_shape
 from app.services.downloads import StoredFile
 from app.services.errors import Conflict, Gone, Invalid, NotFound
 from app.services.pages import Page, page_of, paginate
 from app.services.spacecraft import get_spacecraft, latest_config
 from app.services.suggest import did_you_mean, field_errors
-from app.services.times import iso
+from app.services.times import check_bound, iso
 from app.settings import Settings
 from app.version import __version__
 from processing.time import timescales
@@ -90,7 +91,9 @@ def get_job_type(name: str) -> JobType:
 
 
 def validated_params(jt: JobType, params: dict[str, Any]) -> BaseModel:
-    """The job type's parameter model; Invalid with one error per bad field."""
+    """The job type's parameter model; Invalid with one error per bad field, or when the value's shape
+    exceeds :data:`app.services.bounds.PARAM_BOUNDS` (depth, items per list, string length)."""
+    check_json_shape(params, "params")
     try:
         return jt.params.model_validate(params)
     except ValidationError as exc:
@@ -103,9 +106,9 @@ def _time(value: str | float | None, scale: str, field: str) -> int | None:
         return None
     try:
         if isinstance(value, (int, float)):
-            return int(timescales.seconds_to_tai_ns(np.array([float(value)]), scale)[0])
-        return int(timescales.iso_to_tai_ns(np.array([value], dtype=object), scale)[0])
-    except timescales.TimeValueError as exc:
+            return check_bound(int(timescales.seconds_to_tai_ns(np.array([float(value)]), scale)[0]), field)
+        return check_bound(int(timescales.iso_to_tai_ns(np.array([value], dtype=object), scale)[0]), field)
+    except (timescales.TimeValueError, OverflowError) as exc:
         raise Invalid(f"{field}: {exc}") from None
 
 

@@ -10,7 +10,7 @@ from sqlalchemy import select
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
-from app.jobs.scheduler import CronError, check_cron, next_tick
+from app.jobs.scheduler import MIN_PERIOD_S, CronError, check_cron, next_tick
 from app.services.access import Principal
 from app.services.errors import Conflict, Invalid, NotFound
 from app.services.jobs import get_job_type, validated_params
@@ -44,10 +44,12 @@ def get_schedule(session: Session, id_or_name: str, who: Principal) -> tuple[Sch
     return s, sc
 
 
-def create(session: Session, spec: ScheduleSpec, who: Principal) -> tuple[Schedule, Spacecraft]:
-    """Store a schedule; its cron, job type, parameters and reference kinds are checked now."""
+def create(session: Session, spec: ScheduleSpec, who: Principal,
+           min_period_s: float = MIN_PERIOD_S) -> tuple[Schedule, Spacecraft]:
+    """Store a schedule; its cron (ticks at least ``min_period_s`` apart), job type, parameters and
+    reference kinds are checked now."""
     try:
-        cron = check_cron(spec.cron)
+        cron = check_cron(spec.cron, min_period_s)
     except CronError as exc:
         raise Invalid(f"cron: {exc}") from None
     jt = get_job_type(spec.job_type)

@@ -184,7 +184,8 @@ def create_schedule(request: Request, session: SessionDep, who: WebOperator, nam
     try:
         s, _ = schedules.create(session, ScheduleSpec(
             name=values["name"], cron=values["cron"], job_type=type, spacecraft=spacecraft, params=parsed,
-            reference={}, window=window, window_s=seconds, enabled=enabled == "true"), who)
+            reference={}, window=window, window_s=seconds, enabled=enabled == "true"), who,
+            min_period_s=request.app.state.settings.min_schedule_period_s)
     except ServiceError as exc:
         detail = exc.detail
         if isinstance(detail, dict):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import datetime as dt
 import gzip
 import io
 from dataclasses import replace
@@ -178,3 +179,121 @@ def test_path_like_names_stay_metadata(client, settings):
     assert all(settings.telemetry_dir in p.parents for p in stored_files(settings))
     assert client.post("/api/v1/spacecraft", json={"name": "../x"}).status_code == 422
     assert client.get("/api/v1/spacecraft/sat1/telemetry/..%2F..%2Fetc").status_code == 404
+
+
+def _b64(text: str) -> str:
+    import base64
+
+    return base64.urlsafe_b64encode(text.encode()).decode()
+
+
+@pytest.mark.parametrize("cursor", [_b64("2999-01-01T00:00:00|zz"), _b64("2023-06-01T00:00:00+00:00|"),
+                                    _b64("2023-06-01T00:00:00+00:00|" + "a" * 500), _b64("garbage"),
+                                    _b64("2023-06-01T00:00:00+00:00|'; DROP TABLE job;--"), "A" * 5000, "!!!"])
+def test_crafted_cursors_are_422_on_every_listing(client, cursor):
+    # The red team's case: a cursor holding a naive date gave 500 on /jobs, /keys, /reference, /ingests.
+    make_spacecraft(client)
+    for path in ("/api/v1/jobs", "/api/v1/keys", "/api/v1/reference", "/api/v1/spacecraft/sat1/ingests"):
+        r = client.get(path, params={"cursor": cursor})
+        assert r.status_code == 422 and "cursor" in r.json()["detail"], (path, r.status_code, r.text[:200])
+
+
+def test_a_cursor_with_another_time_zone_still_pages(client):
+    make_spacecraft(client)
+    for _ in range(3):
+        client.post("/api/v1/jobs", json={"type": "executor_check", "spacecraft": "sat1"})
+    r = client.get("/api/v1/jobs", params={"limit": 1})
+    import base64
+
+    raw = base64.urlsafe_b64decode(r.headers["x-next-cursor"] + "==").decode()
+    when, item = raw.split("|")
+    shifted = dt.datetime.fromisoformat(when).astimezone(dt.timezone(dt.timedelta(hours=5)))
+    same = client.get("/api/v1/jobs", params={"limit": 1, "cursor": _b64(f"{shifted.isoformat()}|{item}")})
+    following = client.get("/api/v1/jobs", params={"limit": 1, "cursor": r.headers["x-next-cursor"]})
+    assert same.status_code == 200 and same.json() == following.json() and len(same.json()) == 1
+
+
+def test_job_windows_outside_the_supported_years_are_422(client):
+    make_spacecraft(client)
+    assert upload(client, "gyro", GYRO).status_code == 201
+    for start, end, scale in [("1900-01-01T00:00:00", "2200-01-01T00:00:00", "tai"),  # the red team's 300 years
+                              ("2023-06-01T00:00:00Z", "2200-01-01T00:00:00Z", "utc"),
+                              (-1e9, 1.7e9, "utc"), (1.7e9, 9e9, "gps")]:
+        r = client.post("/api/v1/jobs", json={"type": "telemetry_coverage", "spacecraft": "sat1", "start": start,
+                                              "end": end, "time_scale": scale})
+        assert r.status_code == 422 and "1972" in str(r.json()["detail"]), (start, end, r.text)
+        r = client.get("/api/v1/spacecraft/sat1/telemetry/gyro", params={"start": start, "end": end,
+                                                                         "time_scale": scale})
+        assert r.status_code == 422, (start, end, r.text)
+    assert client.get("/api/v1/jobs").json() == []
+
+
+def test_job_params_bounded_in_depth_items_and_strings(client):
+    make_spacecraft(client)
+    assert upload(client, "gyro", GYRO).status_code == 201
+    deep: dict = {"a": 1}
+    for _ in range(900):
+        deep = {"x": deep}
+    cases = [("telemetry_coverage", {"gap_factor": deep}, "nested deeper"),
+             ("reconstruction", {"stage_params": {"gyro_bias_fit": deep}}, "nested deeper"),
+             ("gyro_bias_fit", {"subintervals": [64] * 5000}, "5000 items"),
+             ("gyro_bias_fit", {"subintervals": [2] * 9}, "subintervals"),  # the field's own bound
+             ("gyro_bias_fit", {"sensor": ["g"] * 65}, "65 items"),
+             ("gyro_bias_fit", {"sensor": "g" * 5000}, "5000 characters"),
+             ("reconstruction", {"stage_params": {f"s{i}": {} for i in range(100)}}, "100 items")]
+    for job_type, params, fragment in cases:
+        r = client.post("/api/v1/jobs", json={"type": job_type, "spacecraft": "sat1", "params": params})
+        assert r.status_code == 422 and fragment in r.text, (job_type, r.status_code, r.text[:300])
+    assert client.get("/api/v1/jobs").json() == []
+
+
+def test_every_job_types_list_params_are_bounded(client):
+    """Generic over the registry: any list-valued parameter of any job type refuses 65 items at submission."""
+    from app.jobs.registry import registry
+
+    make_spacecraft(client)
+    assert upload(client, "gyro", GYRO).status_code == 201
+    checked = 0
+    for jt in registry().values():
+        for name, field in jt.params.model_fields.items():
+            if "list" not in str(field.annotation).lower():
+                continue
+            r = client.post("/api/v1/jobs", json={"type": jt.name, "spacecraft": "sat1", "params": {name: [1] * 65}})
+            assert r.status_code == 422, (jt.name, name, r.text[:200])
+            checked += 1
+    assert checked >= 5 and client.get("/api/v1/jobs").json() == []
+
+
+def test_reconstruction_stage_params_validated_at_submission(client):
+    make_spacecraft(client)
+    assert upload(client, "gyro", GYRO).status_code == 201
+    for stage_params, fragment in [({"gyro_bias_fit": {"bogus": 1}}, "bogus"),
+                                   ({"gyro_bias_fit": {"max_iterations": -3}}, "max_iterations"),
+                                   ({"no_such_stage": {}}, "no_such_stage")]:
+        r = client.post("/api/v1/jobs", json={"type": "reconstruction", "spacecraft": "sat1",
+                                              "params": {"stage_params": stage_params}})
+        assert r.status_code == 422 and fragment in r.text, (stage_params, r.text[:300])
+    assert client.get("/api/v1/jobs").json() == []
+    r = client.post("/api/v1/jobs", json={"type": "reconstruction", "spacecraft": "sat1",
+                                          "params": {"stage_params": {"gyro_bias_fit": {"max_iterations": 7}}}})
+    assert r.status_code == 202
+    stored = client.get(f"/api/v1/jobs/{r.json()['id']}").json()["params"]["stage_params"]["gyro_bias_fit"]
+    assert stored["max_iterations"] == 7 and "subintervals" in stored  # stored as the stage's validated values
+
+
+@pytest.mark.parametrize(("cron", "ok"), [("* * * * * *", False), ("* * * * * */30", False),  # seconds last
+                                          ("* * * * * 0,1", False), ("0 * * * * *", False), ("* * * * * 0", True),
+                                          ("* * * * *", True),
+                                          ("@hourly", True), ("x" * 300, False)])
+def test_cron_period_floor(client, cron, ok):
+    make_spacecraft(client)
+    r = client.post("/api/v1/schedules", json={"name": "s", "cron": cron, "type": "telemetry_coverage",
+                                               "spacecraft": "sat1"})
+    assert r.status_code == (201 if ok else 422), r.text[:300]
+
+
+def test_cron_floor_is_a_setting(limited):
+    client = limited(min_schedule_period_s=1)
+    r = client.post("/api/v1/schedules", json={"name": "s", "cron": "* * * * * *", "type": "telemetry_coverage",
+                                               "spacecraft": "sat1"})
+    assert r.status_code == 201

@@ -78,8 +78,8 @@ class Params(BaseModel):
         60.0, description="The mounting is reported only when every component's sigma is below this."
     )
     subintervals: list[Annotated[int, Field(ge=1, le=64)]] = Field(
-        [2, 4], description="Each n cuts the segment into n equal parts fitted separately (003 §2.4: 2, 4)."
-    )
+        [2, 4], max_length=8,
+        description="Each n cuts the segment into n equal parts fitted separately (003 §2.4: 2, 4).")
     sliding_window_s: PositiveFloat | None = Field(None, description="Also fit sliding windows of this length.")
     sliding_step_s: PositiveFloat | None = Field(None, description="Step of the sliding windows (default: half).")
     gyro_arw_rad_sqrt_s: float | tuple[float, float, float] | None = Field(

@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 from matplotlib.figure import Figure
 from numpy.typing import NDArray
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from app.jobs.registry import JobType
 from processing.attitude import rotations
@@ -65,6 +65,28 @@ class Params(BaseModel):
     apply_gyro_bias: bool = Field(True, description="remove the fitted gyro bias from the rates of "
                                                     "orbital_attitude")
     continue_on_error: bool = Field(False, description="record a failing stage and go on with the next")
+
+    @field_validator("stage_params")
+    @classmethod
+    def _stages_known_and_valid(cls, value: dict[str, dict[str, Any]]) -> dict[str, dict[str, Any]]:
+        """Each stage's parameters checked against its job type's Params at submission (not only when the
+        pipeline reaches the stage), and stored as that model's validated values."""
+        unknown = sorted(set(value) - set(STAGE_NAMES))
+        if unknown:
+            raise ValueError(f"unknown stages {unknown}; stages: {', '.join(STAGE_NAMES)}")
+        available = _available()
+        out = {}
+        for name, given in value.items():
+            jt = available.get(name)
+            if jt is None:  # not installed here: the pipeline notes it and leaves the stage out
+                out[name] = given
+                continue
+            try:
+                out[name] = jt.params.model_validate(given).model_dump(mode="json")
+            except ValidationError as exc:
+                problems = "; ".join(f"{'.'.join(map(str, e['loc'])) or name}: {e['msg']}" for e in exc.errors())
+                raise ValueError(f"{name}: {problems}") from None
+        return out
 
 
 def _available() -> dict[str, JobType]:
