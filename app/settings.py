@@ -36,6 +36,7 @@ class Settings:
     heartbeat_timeout_s: int = 60
     max_upload_rows: int = 20_000_000
     rate_limit_per_minute: int = 1200
+    auth_failures_per_minute: int = 20  # failed authentications per client address before 429
     cors_origins: tuple[str, ...] = ()
     executor: str = "local"  # local | dask
     dask_address: str | None = None  # scheduler address, e.g. tcp://10.0.0.5:8786
@@ -61,6 +62,7 @@ class Settings:
             heartbeat_timeout_s=_int_env(env, "ATTITUDE_JOB_HEARTBEAT_TIMEOUT_S", 60),
             max_upload_rows=_int_env(env, "ATTITUDE_MAX_UPLOAD_ROWS", 20_000_000),
             rate_limit_per_minute=_int_env(env, "ATTITUDE_RATE_LIMIT_PER_MINUTE", 1200),
+            auth_failures_per_minute=_int_env(env, "ATTITUDE_AUTH_FAILURES_PER_MINUTE", 20),
             min_schedule_period_s=_int_env(env, "ATTITUDE_MIN_SCHEDULE_PERIOD_S", 60),
             cors_origins=tuple(o.strip() for o in (env.get("ATTITUDE_CORS_ORIGINS") or "").split(",") if o.strip()),
             **_scale_out_env(env),

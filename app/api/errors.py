@@ -34,7 +34,7 @@ def error_responses(*codes: int) -> dict[int | str, dict[str, Any]]:
 
 
 # What any authenticated /api/v1 route may answer besides its own results.
-COMMON_ERRORS = error_responses(400, 401, 403, 404, 409, 413, 415, 422, 429, 500, 503, 507)
+COMMON_ERRORS = error_responses(400, 401, 403, 404, 409, 413, 414, 415, 422, 429, 500, 503, 507)
 
 
 # The HTTP status of each refusal of the service layer (app/services/errors.py); the UI shows the same.

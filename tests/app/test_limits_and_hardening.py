@@ -234,8 +234,8 @@ def test_job_params_bounded_in_depth_items_and_strings(client):
     deep: dict = {"a": 1}
     for _ in range(900):
         deep = {"x": deep}
-    cases = [("telemetry_coverage", {"gap_factor": deep}, "nested deeper"),
-             ("reconstruction", {"stage_params": {"gyro_bias_fit": deep}}, "nested deeper"),
+    cases = [("telemetry_coverage", {"gap_factor": deep}, "nested 90"),  # the API gate: body too deep
+             ("reconstruction", {"stage_params": {"gyro_bias_fit": {"sensor": [[[[["g"]]]]]}}}, "nested deeper"),
              ("gyro_bias_fit", {"subintervals": [64] * 5000}, "5000 items"),
              ("gyro_bias_fit", {"subintervals": [2] * 9}, "subintervals"),  # the field's own bound
              ("gyro_bias_fit", {"sensor": ["g"] * 65}, "65 items"),
@@ -297,3 +297,41 @@ def test_cron_floor_is_a_setting(limited):
     r = client.post("/api/v1/schedules", json={"name": "s", "cron": "* * * * * *", "type": "telemetry_coverage",
                                                "spacecraft": "sat1"})
     assert r.status_code == 201
+
+
+def _depth_by_parsing(value) -> int:
+    if isinstance(value, dict):
+        return 1 + max((_depth_by_parsing(v) for v in value.values()), default=0)
+    if isinstance(value, list):
+        return 1 + max((_depth_by_parsing(v) for v in value), default=0)
+    return 0
+
+
+@pytest.mark.sqlite_only
+def test_json_depth_scan_agrees_with_a_parser():
+    import json
+
+    from app.api.gate import json_depth
+
+    rng = np.random.default_rng(7)
+    tricky = ['a"b', "[[[", "}}]", "\\", '\\"[', "\\\\", '{"x": ["\\\\\\"]"]}']
+    for _ in range(300):
+        value: object = str(rng.choice(tricky))
+        for _ in range(int(rng.integers(0, 12))):
+            value = [value, "]"] if rng.random() < 0.5 else {str(rng.choice(tricky)): value}
+        text = json.dumps(value, indent=int(rng.integers(0, 2)) or None)
+        assert json_depth(text.encode()) == _depth_by_parsing(value), text
+    assert json_depth(b"") == 0 and json_depth(b"[" * 100_000) == 100_000
+
+
+def test_json_bodies_and_query_strings_are_bounded(client):
+    make_spacecraft(client)
+    big = {"type": "executor_check", "spacecraft": "sat1", "params": {}, "reference": {"k": "x" * (2 << 20)}}
+    r = client.post("/api/v1/jobs", json=big)
+    assert r.status_code == 413 and "limit" in r.json()["detail"]
+    r = client.get("/api/v1/jobs", params={"type": "x" * 10_000})
+    assert r.status_code == 414 and "query string" in r.json()["detail"]
+    r = client.put("/api/v1/spacecraft/sat1/config", content=b"[" * 40 + b"]" * 40,
+                   headers={"Content-Type": "application/json"})
+    assert r.status_code == 422 and "nested" in r.json()["detail"]
+    assert client.get("/api/v1/jobs").json() == []
