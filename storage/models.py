@@ -220,7 +220,8 @@ class ReferenceDataset(Base):
     the raw file as received and its parsed columns, both kept under the data directory."""
 
     __tablename__ = "reference_dataset"
-    __table_args__ = (Index("ix_reference_kind", "kind", "created_at"),)
+    __table_args__ = (Index("ix_reference_kind", "kind", "created_at"),
+                      Index("ix_reference_sc_kind", "spacecraft_id", "kind"))
 
     id: Mapped[str] = mapped_column(String(32), primary_key=True, default=new_id)
     kind: Mapped[str] = mapped_column(String(64))
@@ -236,6 +237,9 @@ class ReferenceDataset(Base):
     details: Mapped[dict[str, Any]]
     created_at: Mapped[dt.datetime] = mapped_column(default=utcnow)
     api_key_id: Mapped[str | None] = mapped_column(String(32), nullable=True)
+    # the spacecraft whose jobs may use it; None: shared by every spacecraft (uploaded by an admin)
+    spacecraft_id: Mapped[int | None] = mapped_column(ForeignKey("spacecraft.id", ondelete="CASCADE"), nullable=True)
+    spacecraft: Mapped[Spacecraft | None] = relationship(lazy="joined")
 
 
 class Schedule(Base):

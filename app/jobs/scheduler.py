@@ -38,8 +38,8 @@ from app.settings import Settings
 from app.version import __version__
 from processing.time import timescales
 from storage import schedules as schedstore
-from storage.models import Job, Schedule, ScheduleRun, SpacecraftConfig, TelemetryFile, utcnow
-from storage.reference import latest_covering
+from storage.models import Job, ReferenceDataset, Schedule, ScheduleRun, SpacecraftConfig, TelemetryFile, utcnow
+from storage.reference import latest_covering, usable_by
 
 log = logging.getLogger("attitude.scheduler")
 
@@ -162,8 +162,12 @@ def new_job(session: Session, schedule: Schedule, fire_at: dt.datetime) -> Job:
         if wanted == "none":
             continue
         if wanted is not None:
+            pinned = session.get(ReferenceDataset, wanted)
+            if pinned is None or not usable_by(pinned, schedule.spacecraft_id):
+                raise SkipTick(f"reference.{kind}: data set {wanted!r} does not exist or is not usable by this "
+                               "spacecraft")
             reference[kind] = wanted
-        elif (d := latest_covering(session, kind, start, end)) is not None:
+        elif (d := latest_covering(session, kind, start, end, spacecraft_id=schedule.spacecraft_id)) is not None:
             reference[kind] = d.id
     return Job(type=jt.name, spacecraft_id=schedule.spacecraft_id, config_version=int(version), start_tai_ns=start,
                end_tai_ns=end, params=params, status="queued", progress=0.0, stage="queued",

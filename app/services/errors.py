@@ -39,3 +39,7 @@ class Unsupported(ServiceError):
 
 class Gone(ServiceError):
     """Recorded in the catalog but missing from the store."""
+
+
+class Forbidden(ServiceError):
+    """The caller's key may not do this, whatever the object (HTTP 403)."""

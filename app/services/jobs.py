@@ -35,7 +35,7 @@ from storage.jobs import ArtifactStore
 from storage.models import Artifact, Calibration, Job, ReferenceDataset, Spacecraft, TelemetryFile
 from storage.models import SpacecraftConfig as ConfigRow
 from storage.parquet_store import ParquetStore
-from storage.reference import latest_covering
+from storage.reference import latest_covering, usable_by
 
 
 class JobCreate(BaseModel):
@@ -149,9 +149,10 @@ def _window(session: Session, sc: Spacecraft, jt: JobType, body: JobCreate) -> t
     return lo, hi
 
 
-def _pick_reference(session: Session, jt: JobType, given: dict[str, str], start: int,
+def _pick_reference(session: Session, jt: JobType, sc: Spacecraft, given: dict[str, str], start: int,
                     end: int) -> dict[str, str]:
-    """Pin the reference data sets a job will use, so that reruns and reports are reproducible."""
+    """Pin the reference data sets a job will use, so that reruns and reports are reproducible: shared
+    ones or the spacecraft's own, never another spacecraft's."""
     unknown = sorted(set(given) - set(jt.reference))
     if unknown:
         raise Invalid(f"job {jt.name} uses no reference data of kind {', '.join(unknown)}"
@@ -163,10 +164,10 @@ def _pick_reference(session: Session, jt: JobType, given: dict[str, str], start:
             continue
         if wanted is not None:
             d = session.get(ReferenceDataset, wanted)
-            if d is None or d.kind != kind:
-                raise Invalid(f"reference.{kind}: no {kind} data set with id {wanted!r}")
+            if d is None or d.kind != kind or not usable_by(d, sc.id):
+                raise Invalid(f"reference.{kind}: no {kind} data set with id {wanted!r} for {sc.name}")
             chosen[kind] = d.id
-        elif (d := latest_covering(session, kind, start, end)) is not None:
+        elif (d := latest_covering(session, kind, start, end, spacecraft_id=sc.id)) is not None:
             chosen[kind] = d.id
     return chosen
 
@@ -201,7 +202,7 @@ def submit(session: Session, body: JobCreate, who: Principal, on_submit: Callabl
     params = validated_params(jt, body.params)
     sc = get_spacecraft(session, body.spacecraft, who)
     start, end = _window(session, sc, jt, body)
-    reference = _pick_reference(session, jt, body.reference, start, end)
+    reference = _pick_reference(session, jt, sc, body.reference, start, end)
     reference.update(_pick_calibration(session, jt, sc, body.calibration))
     if body.screened:
         reference[SCREENING_KEY] = _pick_screening(session, sc, start, end)

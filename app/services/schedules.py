@@ -16,7 +16,8 @@ from app.services.errors import Conflict, Invalid, NotFound
 from app.services.jobs import get_job_type, validated_params
 from app.services.spacecraft import get_spacecraft
 from storage import schedules as schedstore
-from storage.models import Schedule, ScheduleRun, Spacecraft, utcnow
+from storage.models import ReferenceDataset, Schedule, ScheduleRun, Spacecraft, utcnow
+from storage.reference import usable_by
 
 
 @dataclass(frozen=True)
@@ -58,6 +59,10 @@ def create(session: Session, spec: ScheduleSpec, who: Principal,
     if unknown:
         raise Invalid(f"job {jt.name} uses no reference data of kind {', '.join(unknown)}")
     sc = get_spacecraft(session, spec.spacecraft, who)
+    for kind, wanted in spec.reference.items():
+        pinned = session.get(ReferenceDataset, wanted) if wanted != "none" else None
+        if wanted != "none" and (pinned is None or pinned.kind != kind or not usable_by(pinned, sc.id)):
+            raise Invalid(f"reference.{kind}: no {kind} data set with id {wanted!r} for {sc.name}")
     if schedstore.find_schedule(session, spec.name) is not None:
         raise Conflict(f"a schedule named {spec.name!r} exists")
     schedule = schedstore.create_schedule(
