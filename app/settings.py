@@ -35,6 +35,8 @@ class Settings:
     job_timeout_s: int = 3600
     heartbeat_timeout_s: int = 60
     max_upload_rows: int = 20_000_000
+    max_upload_days: int = 1000  # distinct TAI days (one Parquet file each) per upload
+    max_read_rows: int = 20_000_000  # rows one telemetry read (GET) may return
     rate_limit_per_minute: int = 1200
     auth_failures_per_minute: int = 20  # failed authentications per client address before 429
     cors_origins: tuple[str, ...] = ()
@@ -61,6 +63,8 @@ class Settings:
             job_timeout_s=_int_env(env, "ATTITUDE_JOB_TIMEOUT_S", 3600),
             heartbeat_timeout_s=_int_env(env, "ATTITUDE_JOB_HEARTBEAT_TIMEOUT_S", 60),
             max_upload_rows=_int_env(env, "ATTITUDE_MAX_UPLOAD_ROWS", 20_000_000),
+            max_upload_days=_int_env(env, "ATTITUDE_MAX_UPLOAD_DAYS", 1000),
+            max_read_rows=_int_env(env, "ATTITUDE_MAX_READ_ROWS", 20_000_000),
             rate_limit_per_minute=_int_env(env, "ATTITUDE_RATE_LIMIT_PER_MINUTE", 1200),
             auth_failures_per_minute=_int_env(env, "ATTITUDE_AUTH_FAILURES_PER_MINUTE", 20),
             min_schedule_period_s=_int_env(env, "ATTITUDE_MIN_SCHEDULE_PERIOD_S", 60),

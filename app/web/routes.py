@@ -182,7 +182,8 @@ async def upload(request: Request, name: str, session: SessionDep, store: StoreD
     try:
         rec, _notes = await run_in_threadpool(
             telemetry.ingest_upload, session, store, sc, spec, body, content_type, opts, meta, config,
-            (format or None) if format != "table" else None, request.app.state.settings.max_upload_rows)
+            (format or None) if format != "table" else None, request.app.state.settings.max_upload_rows,
+            request.app.state.settings.max_upload_days)
     except UploadError as exc:
         return page(request, "upload_result.html", status_code=422,
                     message=f"upload rejected, nothing stored: {exc}",

@@ -335,3 +335,77 @@ def test_json_bodies_and_query_strings_are_bounded(client):
                    headers={"Content-Type": "application/json"})
     assert r.status_code == 422 and "nested" in r.json()["detail"]
     assert client.get("/api/v1/jobs").json() == []
+
+
+def test_json_records_with_many_distinct_keys_are_refused_fast(client, settings):
+    # The red team's case: 6,000 records of distinct keys (83 kB) took 10 s and 838 MB (records x keys).
+    import json
+    import time
+
+    make_spacecraft(client)
+    records = [{"time": "2023-06-01T00:00:00Z", f"k{i}": 1} for i in range(6000)]
+    t0 = time.perf_counter()
+    r = upload(client, "gyro", json.dumps(records), {"Content-Type": "application/json"})
+    assert r.status_code == 422 and "distinct keys" in r.text, r.text[:300]
+    assert time.perf_counter() - t0 < 5  # linear in the body (about 0.1 s unloaded)
+    assert stored_files(settings) == []
+
+
+def test_parquet_rows_and_decoded_size_checked_from_the_footer(limited, settings, monkeypatch):
+    client = limited(max_upload_rows=1000)
+    many = pa.table({"time": pa.array(np.full(200_000, 1.7e9)), "wx": np.zeros(200_000), "wy": np.zeros(200_000),
+                     "wz": np.zeros(200_000)})
+    body = _parquet(**{n: many.column(n) for n in many.column_names})
+    assert len(body) < 50_000  # constant columns: a small file of many rows
+
+    def no_decoding(*args, **kwargs):
+        raise AssertionError("the rows were decoded")
+
+    monkeypatch.setattr(pq.ParquetFile, "read", no_decoding)
+    monkeypatch.setattr(pq, "read_table", no_decoding)
+    r = upload(client, "gyro", body, PARQUET)
+    assert r.status_code == 413 and "200000 rows exceed the limit of 1000" in r.json()["detail"]
+    monkeypatch.undo()
+    arrow = pa.ipc.new_stream  # Arrow streams: read batch by batch, refused at the first batch too many
+    sink = io.BytesIO()
+    with arrow(sink, many.schema) as writer:
+        for batch in many.to_batches(max_chunksize=600):
+            writer.write_batch(batch)
+    r = upload(client, "gyro", sink.getvalue(), {"Content-Type": "application/vnd.apache.arrow.stream"})
+    assert r.status_code == 413 and "at least 1200 rows" in r.json()["detail"]
+    r = upload(client, "gyro", "time,wx,wy,wz\n" + "2023-06-01T00:00:00Z,1,2,3\n" * 1001)
+    assert r.status_code == 413 and "1001 rows" in r.json()["detail"]
+    assert stored_files(settings) == []
+
+
+def test_an_upload_spread_over_too_many_days_is_refused_before_writing(client, settings):
+    # The red team's case: 20,000 rows on 20,000 days took 192 s and wrote 22,300 files.
+    import time
+
+    make_spacecraft(client)
+    days = 1.5e9 + 86400.0 * np.arange(20_000)
+    body = "time,wx,wy,wz\n" + "".join(f"{t:.0f},1,2,3\n" for t in days)
+    t0 = time.perf_counter()
+    r = upload(client, "gyro", body)
+    assert r.status_code == 413 and "20000 different days" in r.json()["detail"], r.text[:300]
+    assert time.perf_counter() - t0 < 10
+    assert stored_files(settings) == []
+
+
+def test_the_day_cap_is_a_setting(limited, settings):
+    client = limited(max_upload_days=3)
+    days = 1.5e9 + 86400.0 * np.arange(4)
+    assert upload(client, "gyro", "time,wx,wy,wz\n" + "".join(f"{t:.0f},1,2,3\n" for t in days)).status_code == 413
+    r = upload(client, "gyro", "time,wx,wy,wz\n" + "".join(f"{t:.0f},1,2,3\n" for t in days[:3]))
+    assert r.status_code == 201 and len(stored_files(settings)) == 3  # the limit itself is allowed
+
+
+def test_reads_beyond_the_row_cap_are_413_and_narrower_windows_work(limited):
+    client = limited(max_read_rows=50)
+    assert upload(client, "gyro", GYRO).status_code == 201  # 60 rows in one file
+    r = client.get("/api/v1/spacecraft/sat1/telemetry/gyro")
+    assert r.status_code == 413 and "narrower" in r.json()["detail"]
+    r = client.get("/api/v1/spacecraft/sat1/telemetry/gyro", params={"format": "json", "end": "2023-06-01T00:00:10Z"})
+    assert r.status_code == 413  # the file overlapping the window counts whole (known before reading)
+    r = client.get("/api/v1/spacecraft/sat1/telemetry/gyro", params={"start": "2023-06-02T00:00:00Z"})
+    assert r.status_code == 200
