@@ -47,6 +47,14 @@ class Settings:
     scheduler: bool = True  # run the cron scheduler in this instance
     scheduler_poll_s: float = 1.0
     min_schedule_period_s: int = 60  # closest allowed ticks of a schedule's cron
+    # the HTTP server (app/server.py)
+    header_timeout_s: int = 10  # request line and headers complete within this
+    body_timeout_s: int = 60  # longest pause between two chunks of a request body
+    keep_alive_s: int = 5  # an idle keep-alive connection is closed after this
+    max_connections: int = 512  # connections (or running requests) beyond this get 503
+    forwarded_allow_ips: str | None = None  # proxies whose X-Forwarded-For is trusted (comma-separated)
+    max_jobs_per_key: int | None = None  # jobs of one API key running at once; None: max(1, max_jobs - 1)
+    max_queued_jobs_per_key: int = 100  # queued jobs of one API key; more submissions get 429
 
     @classmethod
     def from_env(cls, env: dict[str, str] | None = None) -> Settings:
@@ -68,9 +76,21 @@ class Settings:
             rate_limit_per_minute=_int_env(env, "ATTITUDE_RATE_LIMIT_PER_MINUTE", 1200),
             auth_failures_per_minute=_int_env(env, "ATTITUDE_AUTH_FAILURES_PER_MINUTE", 20),
             min_schedule_period_s=_int_env(env, "ATTITUDE_MIN_SCHEDULE_PERIOD_S", 60),
+            header_timeout_s=_int_env(env, "ATTITUDE_HEADER_TIMEOUT_S", 10),
+            body_timeout_s=_int_env(env, "ATTITUDE_BODY_TIMEOUT_S", 60),
+            keep_alive_s=_int_env(env, "ATTITUDE_KEEP_ALIVE_S", 5),
+            max_connections=_int_env(env, "ATTITUDE_MAX_CONNECTIONS", 512),
+            forwarded_allow_ips=(env.get("ATTITUDE_FORWARDED_ALLOW_IPS") or "").strip() or None,
+            max_jobs_per_key=_int_env(env, "ATTITUDE_MAX_JOBS_PER_KEY", 0) or None,
+            max_queued_jobs_per_key=_int_env(env, "ATTITUDE_MAX_QUEUED_JOBS_PER_KEY", 100),
             cors_origins=tuple(o.strip() for o in (env.get("ATTITUDE_CORS_ORIGINS") or "").split(",") if o.strip()),
             **_scale_out_env(env),
         )
+
+    @property
+    def jobs_per_key(self) -> int:
+        """Jobs of one API key running at once: by default one slot stays free for the other keys."""
+        return self.max_jobs_per_key or max(1, self.max_jobs - 1)
 
     @property
     def telemetry_dir(self) -> Path:

@@ -43,3 +43,7 @@ class Gone(ServiceError):
 
 class Forbidden(ServiceError):
     """The caller's key may not do this, whatever the object (HTTP 403)."""
+
+
+class Busy(ServiceError):
+    """The caller has too much in progress (queued jobs): retry later (HTTP 429)."""

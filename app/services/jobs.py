@@ -21,7 +21,7 @@ from app.reports.specs import parse as parse_specs
 from app.services.access import Principal
 from app.services.bounds import check_json_shape
 from app.services.downloads import StoredFile
-from app.services.errors import Conflict, Gone, Invalid, NotFound
+from app.services.errors import Busy, Conflict, Gone, Invalid, NotFound
 from app.services.pages import Page, page_of, paginate
 from app.services.spacecraft import get_spacecraft, latest_config
 from app.services.suggest import did_you_mean, field_errors
@@ -195,9 +195,16 @@ def _pick_calibration(session: Session, jt: JobType, sc: Spacecraft, wanted: str
     return {} if cal is None else {CALIBRATION_PREFIX + kind: cal.id}
 
 
-def submit(session: Session, body: JobCreate, who: Principal, on_submit: Callable[[], None]) -> Job:
+def submit(session: Session, body: JobCreate, who: Principal, on_submit: Callable[[], None],
+           max_queued: int | None = None) -> Job:
     """Queue a job (``on_submit`` wakes the executor); its window, reference data and calibration are
-    fixed now."""
+    fixed now. Busy when the caller's key already has ``max_queued`` jobs waiting."""
+    if max_queued is not None:
+        waiting = session.scalar(select(func.count()).select_from(Job).where(
+            Job.api_key_id == who.key_id, Job.status == "queued")) or 0
+        if waiting >= max_queued:
+            raise Busy(f"this key has {waiting} queued jobs, the most it may have waiting "
+                       "(ATTITUDE_MAX_QUEUED_JOBS_PER_KEY); submit more when some have started")
     jt = get_job_type(body.type)
     params = validated_params(jt, body.params)
     sc = get_spacecraft(session, body.spacecraft, who)

@@ -409,3 +409,62 @@ def test_reads_beyond_the_row_cap_are_413_and_narrower_windows_work(limited):
     assert r.status_code == 413  # the file overlapping the window counts whole (known before reading)
     r = client.get("/api/v1/spacecraft/sat1/telemetry/gyro", params={"start": "2023-06-02T00:00:00Z"})
     assert r.status_code == 200
+
+
+def _wait_status(client, job_id, wanted, timeout_s=60.0):
+    import time
+
+    deadline = time.monotonic() + timeout_s
+    while (status := client.get(f"/api/v1/jobs/{job_id}").json()["status"]) not in wanted:
+        assert time.monotonic() < deadline, f"job {job_id} still {status}"
+        time.sleep(0.05)
+    return status
+
+
+def test_one_key_cannot_take_every_job_slot(limited):
+    """max_jobs 2, one job per key at once: the second key's job runs while the first key's wait."""
+    client = limited(max_jobs=2, max_jobs_per_key=1, max_queued_jobs_per_key=2)
+    other = {"Authorization": "Bearer " + client.post("/api/v1/keys", json={"name": "o", "role": "operator"}
+                                                      ).json()["secret"]}
+    long = {"type": "executor_check", "spacecraft": "sat1", "params": {"duration_s": 60}}
+    first = client.post("/api/v1/jobs", json=long).json()["id"]
+    _wait_status(client, first, ("running",))
+    mine = [client.post("/api/v1/jobs", json=long).json()["id"] for _ in range(2)]
+    r = client.post("/api/v1/jobs", json=long)  # a third waiting job of this key
+    assert r.status_code == 429 and "queued jobs" in r.json()["detail"]
+    theirs = client.post("/api/v1/jobs", json=long, headers=other).json()["id"]
+    _wait_status(client, theirs, ("running",))  # the free slot goes to the other key
+    assert [client.get(f"/api/v1/jobs/{j}").json()["status"] for j in mine] == ["queued", "queued"]
+    for j in (first, theirs, *mine):
+        client.post(f"/api/v1/jobs/{j}/cancel")
+    for j in (first, theirs):
+        _wait_status(client, j, ("cancelled", "failed"), timeout_s=30)
+
+
+@pytest.mark.sqlite_only
+def test_fair_queued_ids_shares_slots_between_keys(tmp_path):
+    from storage import jobs as jobstore
+    from storage.db import make_engine, session_factory, upgrade
+    from storage.models import Job, Spacecraft
+
+    engine = make_engine(f"sqlite:///{tmp_path / 'c.db'}")
+    upgrade(engine)
+    sessions = session_factory(engine)
+    base = dt.datetime(2026, 1, 1, tzinfo=dt.UTC)
+    from storage.keys import create_key
+
+    with sessions.begin() as s:
+        s.add(Spacecraft(id=1, name="x"))
+        ids = {name: create_key(s, name=name, role="operator")[0].id for name in "abc"}
+        jobs = [("a", "running"), ("a", "queued"), ("a", "queued"), ("a", "queued"), ("b", "queued"),
+                ("c", "queued"), ("b", "queued"), (None, "queued")]
+        for i, (key, status) in enumerate(jobs):
+            s.add(Job(id=f"j{i}", type="executor_check", spacecraft_id=1, config_version=1, start_tai_ns=0,
+                      end_tai_ns=1, params={}, status=status, progress=0.0, stage="", software_version="t",
+                      api_key_id=ids.get(key), cancel_requested=False, reference={}, created_at=base + dt.timedelta(seconds=i)))
+    with sessions() as s:
+        assert jobstore.fair_queued_ids(s, 3, per_key=2) == ["j4", "j5", "j7"]  # b, c, no key: none running
+        assert jobstore.fair_queued_ids(s, 5, per_key=2) == ["j4", "j5", "j7", "j1", "j6"]  # then a (1 running)
+        assert jobstore.fair_queued_ids(s, 10, per_key=1) == ["j4", "j5", "j7"]  # a has its one running
+        assert jobstore.fair_queued_ids(s, 0, per_key=5) == []
+    engine.dispose()
