@@ -461,7 +461,8 @@ def test_fair_queued_ids_shares_slots_between_keys(tmp_path):
         for i, (key, status) in enumerate(jobs):
             s.add(Job(id=f"j{i}", type="executor_check", spacecraft_id=1, config_version=1, start_tai_ns=0,
                       end_tai_ns=1, params={}, status=status, progress=0.0, stage="", software_version="t",
-                      api_key_id=ids.get(key), cancel_requested=False, reference={}, created_at=base + dt.timedelta(seconds=i)))
+                      api_key_id=ids.get(key), cancel_requested=False, reference={},
+                      created_at=base + dt.timedelta(seconds=i)))
     with sessions() as s:
         assert jobstore.fair_queued_ids(s, 3, per_key=2) == ["j4", "j5", "j7"]  # b, c, no key: none running
         assert jobstore.fair_queued_ids(s, 5, per_key=2) == ["j4", "j5", "j7", "j1", "j6"]  # then a (1 running)
