@@ -11,6 +11,7 @@ from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
 from app.jobs.scheduler import MIN_PERIOD_S, CronError, check_cron, next_tick
+from app.names import has_control_characters
 from app.services.access import Principal
 from app.services.errors import Conflict, Invalid, NotFound
 from app.services.jobs import get_job_type, validated_params
@@ -49,6 +50,8 @@ def create(session: Session, spec: ScheduleSpec, who: Principal,
            min_period_s: float = MIN_PERIOD_S) -> tuple[Schedule, Spacecraft]:
     """Store a schedule; its cron (ticks at least ``min_period_s`` apart), job type, parameters and
     reference kinds are checked now."""
+    if spec.name.strip(".") == "" or has_control_characters(spec.name):
+        raise Invalid(f"name: {spec.name!r} is not a schedule name (not only dots, no control characters)")
     try:
         cron = check_cron(spec.cron, min_period_s)
     except CronError as exc:

@@ -21,6 +21,7 @@ from app.api.deps import SessionDep, StoreDep
 from app.api.errors import http_status
 from app.api.files import download_response
 from app.ingest.errors import UploadError
+from app.jobs.outputs import csv_cell
 from app.reports import specs as speclib
 from app.reports import trends as trendlib
 from app.services import coverage, ingests, jobs, telemetry, trends
@@ -220,7 +221,7 @@ def trends_csv(name: str, session: SessionDep, who: WebViewer, type: str | None 
               "sigma"]
     writer = csv.DictWriter(buf, fieldnames=fields, lineterminator="\n")
     writer.writeheader()
-    writer.writerows(trendlib.rows(sel.trends))
+    writer.writerows({k: csv_cell(v) for k, v in row.items()} for row in trendlib.rows(sel.trends))
     return Response(buf.getvalue(), media_type="text/csv",
                     headers={"Content-Disposition": f'attachment; filename="{sel.spacecraft.name}_trends.csv"',
                              "Cache-Control": "no-store"})

@@ -469,3 +469,20 @@ def test_fair_queued_ids_shares_slots_between_keys(tmp_path):
         assert jobstore.fair_queued_ids(s, 10, per_key=1) == ["j4", "j5", "j7"]  # a has its one running
         assert jobstore.fair_queued_ids(s, 0, per_key=5) == []
     engine.dispose()
+
+
+@pytest.mark.parametrize("name", [".", "..", "...", "a\n", "a\r", "a\t", "\x00", "a b", "é"])
+def test_names_are_refused_everywhere(client, name):
+    make_spacecraft(client, "sat1", {})
+    assert client.post("/api/v1/spacecraft", json={"name": name, "config": {}}).status_code == 422
+    bad_config = {"star_trackers": {name: {"q_BS": [1, 0, 0, 0]}}}
+    assert client.put("/api/v1/spacecraft/sat1/config", json=bad_config).status_code == 422
+    r = upload(client, "gyro", "time,wx,wy,wz\n2023-06-01T00:00:00Z,1,2,3\n", sensor=name)
+    assert r.status_code == 422 and "sensor" in r.text
+    r = client.post("/api/v1/schedules", json={"name": name, "cron": "0 2 * * *", "type": "telemetry_coverage",
+                                               "spacecraft": "sat1"})
+    assert r.status_code == 422
+    if name.strip() and not name.isprintable():
+        assert client.post("/api/v1/keys", json={"name": name, "role": "viewer"}).status_code == 422
+    assert [s["name"] for s in client.get("/api/v1/spacecraft").json()] == ["sat1"]
+    assert client.get("/api/v1/spacecraft/sat1/ingests").json() == []
