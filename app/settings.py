@@ -55,6 +55,7 @@ class Settings:
     forwarded_allow_ips: str | None = None  # proxies whose X-Forwarded-For is trusted (comma-separated)
     max_jobs_per_key: int | None = None  # jobs of one API key running at once; None: max(1, max_jobs - 1)
     max_queued_jobs_per_key: int = 100  # queued jobs of one API key; more submissions get 429
+    ui_session_s: int = 43200  # a web UI session ends this long after sign-in
 
     @classmethod
     def from_env(cls, env: dict[str, str] | None = None) -> Settings:
@@ -83,6 +84,7 @@ class Settings:
             forwarded_allow_ips=(env.get("ATTITUDE_FORWARDED_ALLOW_IPS") or "").strip() or None,
             max_jobs_per_key=_int_env(env, "ATTITUDE_MAX_JOBS_PER_KEY", 0) or None,
             max_queued_jobs_per_key=_int_env(env, "ATTITUDE_MAX_QUEUED_JOBS_PER_KEY", 100),
+            ui_session_s=_int_env(env, "ATTITUDE_UI_SESSION_S", 43200),
             cors_origins=tuple(o.strip() for o in (env.get("ATTITUDE_CORS_ORIGINS") or "").split(",") if o.strip()),
             **_scale_out_env(env),
         )

@@ -164,6 +164,18 @@ class ApiKeyGrant(Base):
     spacecraft_id: Mapped[int] = mapped_column(ForeignKey("spacecraft.id", ondelete="CASCADE"), primary_key=True)
 
 
+class UiSession(Base):
+    """A signed-in web UI session: the cookie holds the random token, the catalog its SHA-256."""
+
+    __tablename__ = "ui_session"
+    __table_args__ = (Index("ix_ui_session_key", "key_id"),)
+
+    token_sha256: Mapped[str] = mapped_column(String(64), primary_key=True)
+    key_id: Mapped[str] = mapped_column(ForeignKey("api_key.id", ondelete="CASCADE"))
+    created_at: Mapped[dt.datetime] = mapped_column(default=utcnow)
+    expires_at: Mapped[dt.datetime]
+
+
 class Job(Base):
     """A batch job: the catalog row is the source of truth of its state."""
 

@@ -5,14 +5,14 @@ from __future__ import annotations
 import datetime as dt
 from dataclasses import dataclass
 
-from sqlalchemy import select
+from sqlalchemy import delete, select
 from sqlalchemy.orm import Session, object_session
 
 from app.names import has_control_characters
 from app.services.errors import Invalid, NotFound
 from app.services.pages import Page, page_of, paginate
 from storage.keys import create_key
-from storage.models import ApiKey, Spacecraft, utcnow
+from storage.models import ApiKey, Spacecraft, UiSession, utcnow
 
 
 @dataclass(frozen=True)
@@ -73,5 +73,6 @@ def revoke(session: Session, key_id: str) -> KeyInfo:
         raise NotFound(f"API key {key_id!r} not found")
     if key.revoked_at is None:
         key.revoked_at = utcnow()
+        session.execute(delete(UiSession).where(UiSession.key_id == key.id))  # its UI sessions end with it
         session.commit()
     return describe(key)
