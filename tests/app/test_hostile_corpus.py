@@ -66,7 +66,7 @@ def server(tmp_path_factory) -> Iterator[dict[str, Any]]:
     data = tmp_path_factory.mktemp("corpus")
     env = {"ATTITUDE_DATA_DIR": str(data), "ATTITUDE_DATABASE_URL": "", "ATTITUDE_BOOTSTRAP_TOKEN": TOKEN,
            "ATTITUDE_MAX_JOBS": "1", "ATTITUDE_SCHEDULER": "0", "ATTITUDE_MAX_READ_ROWS": "5",
-           "ATTITUDE_HEADER_TIMEOUT_S": "2", "ATTITUDE_AUTH_FAILURES_PER_MINUTE": "20",
+           "ATTITUDE_HEADER_TIMEOUT_S": "2", "ATTITUDE_BODY_TIMEOUT_S": "2", "ATTITUDE_AUTH_FAILURES_PER_MINUTE": "20",
            "ATTITUDE_MAX_UPLOAD_BYTES": str(64 << 20), "ATTITUDE_MAX_UPLOAD_ROWS": "1000000"}
     port = free_port()
     log = open(data / "server.log", "ab")  # noqa: SIM115
@@ -258,6 +258,20 @@ def test_slow_headers_are_cut_off(server):
     finally:
         for s in slow:
             s.close()
+
+
+def test_a_stalled_body_is_cut_off(server):
+    host, port = server["base"].removeprefix("http://").split(":")
+    with socket.create_connection((host, int(port))) as s:
+        s.sendall(f"POST {UP} HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer {TOKEN}\r\nContent-Type: text/csv\r\n"
+                  "Content-Length: 100000\r\n\r\ntime,wx".encode())  # then nothing more
+        s.settimeout(15)
+        t0 = time.monotonic()
+        while s.recv(65536):  # whatever the service answers, the connection ends
+            pass
+        assert time.monotonic() - t0 < 10  # ATTITUDE_BODY_TIMEOUT_S=2
+    status, raw, _ = request(server["base"], "GET", "/api/v1/spacecraft/sat1/ingests")
+    assert status == 200 and len(json.loads(raw)) == 1  # nothing stored
 
 
 def test_failed_authentications_are_throttled_last(server):
