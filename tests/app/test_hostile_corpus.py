@@ -218,6 +218,7 @@ def test_hostile_corpus(server):
             reason = json.loads(raw)["detail"]
         except (ValueError, KeyError, TypeError):
             reason = None
+        print(f"  {what}: {status} in {took * 1000:.0f} ms")
         if status != expected or not reason:
             failures.append(f"{what}: {status} (expected {expected}) {raw[:200]!r}")
         elif took > 10:

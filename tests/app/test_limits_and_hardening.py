@@ -210,7 +210,8 @@ def test_a_cursor_with_another_time_zone_still_pages(client):
     shifted = dt.datetime.fromisoformat(when).astimezone(dt.timezone(dt.timedelta(hours=5)))
     same = client.get("/api/v1/jobs", params={"limit": 1, "cursor": _b64(f"{shifted.isoformat()}|{item}")})
     following = client.get("/api/v1/jobs", params={"limit": 1, "cursor": r.headers["x-next-cursor"]})
-    assert same.status_code == 200 and same.json() == following.json() and len(same.json()) == 1
+    assert same.status_code == 200 and len(same.json()) == 1
+    assert [j["id"] for j in same.json()] == [j["id"] for j in following.json()]  # (statuses move meanwhile)
 
 
 def test_job_windows_outside_the_supported_years_are_422(client):
