@@ -487,3 +487,17 @@ def test_names_are_refused_everywhere(client, name):
         assert client.post("/api/v1/keys", json={"name": name, "role": "viewer"}).status_code == 422
     assert [s["name"] for s in client.get("/api/v1/spacecraft").json()] == ["sat1"]
     assert client.get("/api/v1/spacecraft/sat1/ingests").json() == []
+
+
+@pytest.mark.sqlite_only
+def test_sliding_windows_of_gyro_bias_fit_are_bounded_before_fitting():
+    import time
+
+    from processing.tasks import TaskError
+    from tests.app.test_job_gyro_bias_fit import run, scenario
+
+    sc = scenario(duration_s=300.0, gyro_period_s=1.0)
+    t0 = time.perf_counter()
+    with pytest.raises(TaskError, match="at most 2000"):
+        run(sc, sliding_window_s=10.0, sliding_step_s=0.01)  # ~29,000 fits over the 300 s segment
+    assert time.perf_counter() - t0 < 5  # refused before the whole-segment fit
