@@ -36,7 +36,7 @@ PRINCIPAL_KEY = "attitude.principal"
 MAX_QUERY_BYTES = 8192
 MAX_JSON_BODY_BYTES = 1 << 20
 MAX_JSON_DEPTH = 32
-_TOKEN = re.compile(r"[A-Za-z0-9\-._~+/]+=*")  # RFC 6750 b64token
+_TOKEN = re.compile(r"[\x21-\x7e]+")  # visible ASCII, no space (our keys are RFC 6750 b64tokens)
 _UPLOADS = (re.compile(r"^/api/v1/spacecraft/[^/]+/telemetry/[^/]+/?$"), re.compile(r"^/api/v1/reference/[^/]+/?$"))
 _BODY_METHODS = ("POST", "PUT", "PATCH", "DELETE")
 
