@@ -12,10 +12,9 @@ from app.settings import Settings
 
 
 def _serve(args: argparse.Namespace) -> int:
-    import uvicorn
-
     from app.exposure import UnprotectedBind, check_bind
     from app.main import create_app
+    from app.server import serve
 
     settings = Settings.from_env()
     try:
@@ -23,7 +22,7 @@ def _serve(args: argparse.Namespace) -> int:
     except UnprotectedBind as exc:
         print(f"attitude serve: {exc}", file=sys.stderr)
         return 2
-    uvicorn.run(create_app(settings), host=args.host, port=args.port, log_level=args.log_level)
+    serve(create_app(settings), settings, host=args.host, port=args.port, log_level=args.log_level)
     return 0
 
 

@@ -7,16 +7,15 @@ stored canonical (q0 >= 0). Unknown keys are rejected so that a typo does not si
 from __future__ import annotations
 
 import math
-import re
 from typing import Annotated
 
 import numpy as np
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, field_validator
 
+from app.names import valid_name
 from app.reports.specs import Specifications
 from processing.attitude.rotations import quat_canonical
 
-NAME = re.compile(r"^[A-Za-z0-9_.\-]{1,64}$")
 UNIT_TOLERANCE = 1e-6
 
 
@@ -83,8 +82,8 @@ class SpacecraftConfig(_Strict):
     @classmethod
     def _names(cls, v: dict[str, StarTracker]) -> dict[str, StarTracker]:
         for name in v:
-            if not NAME.match(name):
-                raise ValueError(f"star tracker name {name!r} must be 1-64 letters, digits, _ . -")
+            if not valid_name(name):
+                raise ValueError(f"star tracker name {name!r} must be 1-64 letters, digits, _ . - (not only dots)")
         return v
 
     @field_validator("inertia_kg_m2")

@@ -102,7 +102,8 @@ def scenarios(start: int, seed: int, duration_s: float) -> list[dict[str, Any]]:
 
 
 def _env(out: Path, token: str) -> dict[str, str]:
-    return {"ATTITUDE_DATA_DIR": str(out / "data"), "ATTITUDE_BOOTSTRAP_TOKEN": token, "ATTITUDE_DATABASE_URL": ""}
+    return {"ATTITUDE_DATA_DIR": str(out / "data"), "ATTITUDE_BOOTSTRAP_TOKEN": token, "ATTITUDE_DATABASE_URL": "",
+            "ATTITUDE_MAX_JOBS_PER_KEY": "64"}  # the demo's one key may use every job slot
 
 
 def run(out: Path, seed: int, duration_s: float) -> tuple[list[tuple[str, str, dict[str, Any], float, Path]], str]:

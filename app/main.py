@@ -15,6 +15,7 @@ from sqlalchemy import text
 
 from app.api.deps import RejectUnknownQuery
 from app.api.errors import COMMON_ERRORS, handle_service_errors
+from app.api.gate import ApiGateMiddleware, FailureThrottle
 from app.api.middleware import BodyLimitMiddleware, RateLimiter, SecurityHeadersMiddleware
 from app.api.routes import exports, ingests, jobs, keys, reference, schedules, spacecraft, telemetry
 from app.jobs.dask_executor import make_executor
@@ -71,12 +72,16 @@ def create_app(settings: Settings | None = None) -> FastAPI:
                               "attitude and accuracy reports.")
 
     app.state.rate_limiter = RateLimiter(settings.rate_limit_per_minute)
+    app.state.auth_throttle = FailureThrottle(settings.auth_failures_per_minute)
+    # outermost last: security headers -> CORS -> the API gate (authentication first) -> body limit -> routes
+    app.add_middleware(BodyLimitMiddleware, limit=settings.max_upload_bytes)
+    app.add_middleware(ApiGateMiddleware, sessions=lambda: app.state.sessions(), rate_limiter=app.state.rate_limiter,
+                       throttle=app.state.auth_throttle, rate_limit_per_minute=settings.rate_limit_per_minute)
     if settings.cors_origins:  # off unless configured
         app.add_middleware(CORSMiddleware, allow_origins=list(settings.cors_origins),
                            allow_methods=["GET", "POST", "PUT", "DELETE"],
                            allow_headers=["Authorization", "Content-Type"])
     app.add_middleware(SecurityHeadersMiddleware)
-    app.add_middleware(BodyLimitMiddleware, limit=settings.max_upload_bytes)
 
     handle_service_errors(app)  # refusals of app/services (app/services/errors.py) -> 4xx
 

@@ -35,7 +35,10 @@ class Settings:
     job_timeout_s: int = 3600
     heartbeat_timeout_s: int = 60
     max_upload_rows: int = 20_000_000
+    max_upload_days: int = 1000  # distinct TAI days (one Parquet file each) per upload
+    max_read_rows: int = 20_000_000  # rows one telemetry read (GET) may return
     rate_limit_per_minute: int = 1200
+    auth_failures_per_minute: int = 20  # failed authentications per client address before 429
     cors_origins: tuple[str, ...] = ()
     executor: str = "local"  # local | dask
     dask_address: str | None = None  # scheduler address, e.g. tcp://10.0.0.5:8786
@@ -43,6 +46,16 @@ class Settings:
     data_url: str | None = None  # fsspec/pyarrow URL for Parquet and artifacts, e.g. s3://bucket/prefix
     scheduler: bool = True  # run the cron scheduler in this instance
     scheduler_poll_s: float = 1.0
+    min_schedule_period_s: int = 60  # closest allowed ticks of a schedule's cron
+    # the HTTP server (app/server.py)
+    header_timeout_s: int = 10  # request line and headers complete within this
+    body_timeout_s: int = 60  # longest pause between two chunks of a request body
+    keep_alive_s: int = 5  # an idle keep-alive connection is closed after this
+    max_connections: int = 512  # connections (or running requests) beyond this get 503
+    forwarded_allow_ips: str | None = None  # proxies whose X-Forwarded-For is trusted (comma-separated)
+    max_jobs_per_key: int | None = None  # jobs of one API key running at once; None: max(1, max_jobs - 1)
+    max_queued_jobs_per_key: int = 100  # queued jobs of one API key; more submissions get 429
+    ui_session_s: int = 43200  # a web UI session ends this long after sign-in
 
     @classmethod
     def from_env(cls, env: dict[str, str] | None = None) -> Settings:
@@ -59,10 +72,27 @@ class Settings:
             job_timeout_s=_int_env(env, "ATTITUDE_JOB_TIMEOUT_S", 3600),
             heartbeat_timeout_s=_int_env(env, "ATTITUDE_JOB_HEARTBEAT_TIMEOUT_S", 60),
             max_upload_rows=_int_env(env, "ATTITUDE_MAX_UPLOAD_ROWS", 20_000_000),
+            max_upload_days=_int_env(env, "ATTITUDE_MAX_UPLOAD_DAYS", 1000),
+            max_read_rows=_int_env(env, "ATTITUDE_MAX_READ_ROWS", 20_000_000),
             rate_limit_per_minute=_int_env(env, "ATTITUDE_RATE_LIMIT_PER_MINUTE", 1200),
+            auth_failures_per_minute=_int_env(env, "ATTITUDE_AUTH_FAILURES_PER_MINUTE", 20),
+            min_schedule_period_s=_int_env(env, "ATTITUDE_MIN_SCHEDULE_PERIOD_S", 60),
+            header_timeout_s=_int_env(env, "ATTITUDE_HEADER_TIMEOUT_S", 10),
+            body_timeout_s=_int_env(env, "ATTITUDE_BODY_TIMEOUT_S", 60),
+            keep_alive_s=_int_env(env, "ATTITUDE_KEEP_ALIVE_S", 5),
+            max_connections=_int_env(env, "ATTITUDE_MAX_CONNECTIONS", 512),
+            forwarded_allow_ips=(env.get("ATTITUDE_FORWARDED_ALLOW_IPS") or "").strip() or None,
+            max_jobs_per_key=_int_env(env, "ATTITUDE_MAX_JOBS_PER_KEY", 0) or None,
+            max_queued_jobs_per_key=_int_env(env, "ATTITUDE_MAX_QUEUED_JOBS_PER_KEY", 100),
+            ui_session_s=_int_env(env, "ATTITUDE_UI_SESSION_S", 43200),
             cors_origins=tuple(o.strip() for o in (env.get("ATTITUDE_CORS_ORIGINS") or "").split(",") if o.strip()),
             **_scale_out_env(env),
         )
+
+    @property
+    def jobs_per_key(self) -> int:
+        """Jobs of one API key running at once: by default one slot stays free for the other keys."""
+        return self.max_jobs_per_key or max(1, self.max_jobs - 1)
 
     @property
     def telemetry_dir(self) -> Path:

@@ -105,7 +105,8 @@ def main() -> None:
             data = Path(tmp) / mode
             env = {"ATTITUDE_DATA_DIR": str(data), "ATTITUDE_DATABASE_URL": "", "ATTITUDE_BOOTSTRAP_TOKEN": TOKEN,
                    "ATTITUDE_MAX_JOBS": str(args.workers), "ATTITUDE_EXECUTOR": mode,
-                   "ATTITUDE_RATE_LIMIT_PER_MINUTE": "100000"}
+                   "ATTITUDE_RATE_LIMIT_PER_MINUTE": "100000",
+                   "ATTITUDE_MAX_JOBS_PER_KEY": str(args.workers)}  # one key: every slot (as on Dask)
             if mode == "dask":
                 with dask.config.set({"distributed.scheduler.allowed-failures": 0}), \
                         LocalCluster(n_workers=args.workers, threads_per_worker=1, processes=True,

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from sqlalchemy import select, update
+from sqlalchemy import func, select, update
 from sqlalchemy.orm import Session
 
 from storage.fs import Location, resolve
@@ -47,6 +47,29 @@ def claim(session: Session, job_id: str) -> bool:
 def queued_ids(session: Session, limit: int) -> list[str]:
     return list(session.scalars(select(Job.id).where(Job.status == "queued")
                                 .order_by(Job.created_at).limit(limit)))
+
+
+def fair_queued_ids(session: Session, limit: int, per_key: int, window: int = 500) -> list[str]:
+    """Up to ``limit`` queued jobs to claim next, sharing the job slots between API keys: each pick goes to
+    the key with the fewest running (and already picked) jobs, oldest job first, and no key gets more than
+    ``per_key`` running at once (counted over every instance sharing the catalog)."""
+    if limit <= 0:
+        return []
+    counts: dict[str | None, int] = {
+        k: int(n) for k, n in session.execute(select(Job.api_key_id, func.count()).where(Job.status == "running")
+                                              .group_by(Job.api_key_id)).all()}
+    queued = list(session.execute(select(Job.id, Job.api_key_id).where(Job.status == "queued")
+                                  .order_by(Job.created_at, Job.id).limit(window)).all())
+    picked: list[str] = []
+    while len(picked) < limit and queued:
+        eligible = [(counts.get(key, 0), i) for i, (_, key) in enumerate(queued) if counts.get(key, 0) < per_key]
+        if not eligible:
+            break
+        _, i = min(eligible)
+        job_id, key = queued.pop(i)
+        counts[key] = counts.get(key, 0) + 1
+        picked.append(job_id)
+    return picked
 
 
 def heartbeat(session: Session, job_ids: list[str]) -> None:

@@ -9,10 +9,10 @@ import datetime as dt
 import hashlib
 import secrets
 
-from sqlalchemy import select
+from sqlalchemy import delete, select
 from sqlalchemy.orm import Session
 
-from storage.models import ApiKey, ApiKeyGrant, utcnow
+from storage.models import ApiKey, ApiKeyGrant, UiSession, utcnow
 
 ROLES = ("viewer", "operator", "admin")
 KEY_PREFIX = "att_"
@@ -55,6 +55,32 @@ def find_active(session: Session, secret: str) -> ApiKey | None:
     if key.expires_at is not None and key.expires_at <= utcnow():
         return None
     return key
+
+
+def start_session(session: Session, key: ApiKey, ttl_s: float) -> str:
+    """A new UI session of ``key`` ending after ``ttl_s``; returns its token (only the digest is stored)."""
+    token = secrets.token_urlsafe(32)
+    now = utcnow()
+    session.execute(delete(UiSession).where(UiSession.expires_at <= now))  # forget the expired ones
+    session.add(UiSession(token_sha256=digest(token), key_id=key.id, created_at=now,
+                          expires_at=now + dt.timedelta(seconds=ttl_s)))
+    session.flush()
+    return token
+
+
+def find_session_key(session: Session, token: str) -> ApiKey | None:
+    """The active key of an unexpired UI session; None when the session, or its key, ended."""
+    row = session.get(UiSession, digest(token))
+    if row is None or row.expires_at <= utcnow():
+        return None
+    key = session.get(ApiKey, row.key_id)
+    if key is None or key.revoked_at is not None or (key.expires_at is not None and key.expires_at <= utcnow()):
+        return None
+    return key
+
+
+def end_session(session: Session, token: str) -> None:
+    session.execute(delete(UiSession).where(UiSession.token_sha256 == digest(token)))
 
 
 def ensure_bootstrap_key(session: Session, secret: str) -> ApiKey:

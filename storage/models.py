@@ -164,6 +164,18 @@ class ApiKeyGrant(Base):
     spacecraft_id: Mapped[int] = mapped_column(ForeignKey("spacecraft.id", ondelete="CASCADE"), primary_key=True)
 
 
+class UiSession(Base):
+    """A signed-in web UI session: the cookie holds the random token, the catalog its SHA-256."""
+
+    __tablename__ = "ui_session"
+    __table_args__ = (Index("ix_ui_session_key", "key_id"),)
+
+    token_sha256: Mapped[str] = mapped_column(String(64), primary_key=True)
+    key_id: Mapped[str] = mapped_column(ForeignKey("api_key.id", ondelete="CASCADE"))
+    created_at: Mapped[dt.datetime] = mapped_column(default=utcnow)
+    expires_at: Mapped[dt.datetime]
+
+
 class Job(Base):
     """A batch job: the catalog row is the source of truth of its state."""
 
@@ -220,7 +232,8 @@ class ReferenceDataset(Base):
     the raw file as received and its parsed columns, both kept under the data directory."""
 
     __tablename__ = "reference_dataset"
-    __table_args__ = (Index("ix_reference_kind", "kind", "created_at"),)
+    __table_args__ = (Index("ix_reference_kind", "kind", "created_at"),
+                      Index("ix_reference_sc_kind", "spacecraft_id", "kind"))
 
     id: Mapped[str] = mapped_column(String(32), primary_key=True, default=new_id)
     kind: Mapped[str] = mapped_column(String(64))
@@ -236,6 +249,9 @@ class ReferenceDataset(Base):
     details: Mapped[dict[str, Any]]
     created_at: Mapped[dt.datetime] = mapped_column(default=utcnow)
     api_key_id: Mapped[str | None] = mapped_column(String(32), nullable=True)
+    # the spacecraft whose jobs may use it; None: shared by every spacecraft (uploaded by an admin)
+    spacecraft_id: Mapped[int | None] = mapped_column(ForeignKey("spacecraft.id", ondelete="CASCADE"), nullable=True)
+    spacecraft: Mapped[Spacecraft | None] = relationship(lazy="joined")
 
 
 class Schedule(Base):

@@ -29,8 +29,10 @@ class ReferenceStore:
 
     def save(self, session: Session, *, kind: str, name: str, filename: str | None, raw: bytes,
              columns: dict[str, Any], start_tai_ns: int | None, end_tai_ns: int | None,
-             details: dict[str, Any], api_key_id: str | None) -> ReferenceDataset:
-        """Write both files (atomically), then add the catalog row; the caller commits."""
+             details: dict[str, Any], api_key_id: str | None,
+             spacecraft_id: int | None = None) -> ReferenceDataset:
+        """Write both files (atomically), then add the catalog row; the caller commits. ``spacecraft_id``
+        None: shared by every spacecraft."""
         dataset_id = new_id()
         table = pa.table({k: np.asarray(v) for k, v in columns.items()})
         buf = io.BytesIO()
@@ -41,7 +43,8 @@ class ReferenceStore:
         row = ReferenceDataset(id=dataset_id, kind=kind, name=name, filename=filename, size_bytes=len(raw),
                                checksum_sha256=raw_file.checksum_sha256, raw_path=raw_file.path,
                                parsed_path=parsed.path, rows=table.num_rows, start_tai_ns=start_tai_ns,
-                               end_tai_ns=end_tai_ns, details=details, api_key_id=api_key_id)
+                               end_tai_ns=end_tai_ns, details=details, api_key_id=api_key_id,
+                               spacecraft_id=spacecraft_id)
         session.add(row)
         session.flush()
         return row
@@ -57,9 +60,17 @@ class ReferenceStore:
         self._files.remove_job(dataset_id)
 
 
-def latest_covering(session: Session, kind: str, start_tai_ns: int, end_tai_ns: int) -> ReferenceDataset | None:
-    """Newest data set of ``kind`` overlapping [start, end] (or without a time span)."""
+def usable_by(dataset: ReferenceDataset, spacecraft_id: int) -> bool:
+    """Whether jobs of the spacecraft may use the data set: shared ones, or those scoped to it."""
+    return dataset.spacecraft_id is None or dataset.spacecraft_id == spacecraft_id
+
+
+def latest_covering(session: Session, kind: str, start_tai_ns: int, end_tai_ns: int, *,
+                    spacecraft_id: int) -> ReferenceDataset | None:
+    """Newest data set of ``kind`` overlapping [start, end] (or without a time span) that jobs of the
+    spacecraft may use (shared, or scoped to it: never another spacecraft's)."""
     q = select(ReferenceDataset).where(ReferenceDataset.kind == kind).where(
+        or_(ReferenceDataset.spacecraft_id.is_(None), ReferenceDataset.spacecraft_id == spacecraft_id)).where(
         or_(ReferenceDataset.start_tai_ns.is_(None),
             (ReferenceDataset.start_tai_ns <= end_tai_ns) & (ReferenceDataset.end_tai_ns >= start_tai_ns)))
     return session.scalar(q.order_by(ReferenceDataset.created_at.desc()).limit(1))

@@ -196,13 +196,23 @@ def retracted_inputs(session: Session, job_ids: Iterable[str]) -> dict[str, list
     return out
 
 
+class TooManyRowsToRead(ValueError):
+    """A read window holds more stored rows than the caller allows (known from the catalog, before reading)."""
+
+
 def read_window(session: Session, store: ParquetStore, spacecraft_id: int, spec: StreamSpec,
                 start_tai_ns: int | None = None, end_tai_ns: int | None = None,
-                sensor: str | None = None) -> pa.Table:
-    """All stored samples of one stream in [start, end], sorted by identity, without duplicates."""
+                sensor: str | None = None, max_rows: int | None = None) -> pa.Table:
+    """All stored samples of one stream in [start, end], sorted by identity, without duplicates.
+
+    ``max_rows``: TooManyRowsToRead, before any file is opened, when the files overlapping the window
+    hold more rows (an upper bound: a file partly outside the window counts whole)."""
     files = _files_in_window(session, spacecraft_id, spec.name, start_tai_ns, end_tai_ns)
     if sensor is not None:
         files = [f for f in files if sensor in f.sensors.split(",")]
+    if max_rows is not None and (held := sum(f.rows for f in files)) > max_rows:
+        raise TooManyRowsToRead(f"the window holds up to {held} stored {spec.name} rows; at most {max_rows} are "
+                                "returned per read (ATTITUDE_MAX_READ_ROWS): give a narrower start/end")
     tables = _read_files(session, store, files, start_tai_ns, end_tai_ns)
     if not tables:
         return empty_table(spec)

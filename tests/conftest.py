@@ -56,7 +56,9 @@ def database_url(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[str
 
 @pytest.fixture
 def settings(tmp_path: Path, database_url: str) -> Settings:
-    return Settings(data_dir=tmp_path / "data", database_url=database_url, bootstrap_token=ADMIN_TOKEN, max_jobs=2)
+    # tests make many failed authentications from one address on purpose: throttled only where tested
+    return Settings(data_dir=tmp_path / "data", database_url=database_url, bootstrap_token=ADMIN_TOKEN, max_jobs=2,
+                    auth_failures_per_minute=100_000, max_jobs_per_key=2)  # per-key slots: where tested
 
 
 @pytest.fixture

@@ -10,6 +10,7 @@ from fastapi import Depends, HTTPException, Request, status
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 from sqlalchemy.orm import Session
 
+from app.api.gate import PRINCIPAL_KEY
 from app.api.middleware import retry_after_header
 from app.services.access import Principal, identify
 from app.settings import Settings
@@ -41,6 +42,11 @@ _bearer = HTTPBearer(auto_error=False, description="API key: `Authorization: Bea
 
 def _authenticate(request: Request,
                   credentials: Annotated[HTTPAuthorizationCredentials | None, Depends(_bearer)]) -> Principal:
+    """The caller the API gate (app/api/gate.py) authenticated before routing; the checks below only
+    serve an app mounted without the gate."""
+    gated: Principal | None = request.scope.get(PRINCIPAL_KEY)
+    if gated is not None:
+        return gated
     if credentials is None or credentials.scheme.lower() != "bearer" or not credentials.credentials:
         raise HTTPException(status.HTTP_401_UNAUTHORIZED, "missing API key (Authorization: Bearer <key>)",
                             headers={"WWW-Authenticate": "Bearer"})

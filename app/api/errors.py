@@ -9,7 +9,7 @@ from fastapi import FastAPI, Request
 from fastapi.responses import JSONResponse
 from pydantic import BaseModel, ConfigDict
 
-from app.services.errors import Conflict, Gone, Invalid, NotFound, ServiceError, TooLarge, Unsupported
+from app.services.errors import Busy, Conflict, Forbidden, Gone, Invalid, NotFound, ServiceError, TooLarge, Unsupported
 
 
 class ErrorItem(BaseModel):
@@ -34,12 +34,12 @@ def error_responses(*codes: int) -> dict[int | str, dict[str, Any]]:
 
 
 # What any authenticated /api/v1 route may answer besides its own results.
-COMMON_ERRORS = error_responses(400, 401, 403, 404, 409, 413, 415, 422, 429, 500, 503, 507)
+COMMON_ERRORS = error_responses(400, 401, 403, 404, 409, 413, 414, 415, 422, 429, 500, 503, 507)
 
 
 # The HTTP status of each refusal of the service layer (app/services/errors.py); the UI shows the same.
 SERVICE_STATUS: dict[type[ServiceError], int] = {NotFound: 404, Conflict: 409, Gone: 410, TooLarge: 413,
-                                                 Unsupported: 415, Invalid: 422}
+                                                 Unsupported: 415, Invalid: 422, Forbidden: 403, Busy: 429}
 
 
 def http_status(exc: ServiceError) -> int:

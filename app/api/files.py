@@ -31,12 +31,11 @@ async def read_limited(request: Request, limit: int) -> bytes:
     size = 0
     try:
         async for chunk in request.stream():
-            if inflater is not None:
-                chunk = inflater.feed(chunk)
-            size += len(chunk)
+            parts = inflater.feed_parts(chunk) if inflater is not None else [chunk]
+            size += sum(map(len, parts))
             if size > limit:
                 raise HTTPException(413, f"body exceeds the limit of {limit} bytes")
-            chunks.append(chunk)
+            chunks.extend(parts)
         if inflater is not None:
             inflater.close()
     except InflatedTooLarge as exc:

@@ -12,6 +12,7 @@ from __future__ import annotations
 import zlib
 
 GZIP_MAGIC = b"\x1f\x8b"
+STEP = 1 << 20  # inflated bytes per zlib call: a bomb never holds more than the limit plus one step
 
 
 class GzipBodyError(ValueError):
@@ -33,6 +34,10 @@ class GzipInflater:
         self._pending = b""
 
     def feed(self, data: bytes) -> bytes:
+        return b"".join(self.feed_parts(data))
+
+    def feed_parts(self, data: bytes) -> list[bytes]:
+        """The inflated bytes of ``data`` in pieces of at most :data:`STEP` bytes (no joined copy)."""
         out: list[bytes] = []
         data = self._pending + data
         self._pending = b""
@@ -47,11 +52,11 @@ class GzipInflater:
                                         "are refused so that nothing is silently dropped)")
                 self._member = zlib.decompressobj(wbits=16 + zlib.MAX_WBITS)
             try:
-                chunk = self._member.decompress(data, self.limit - self.size + 1)
+                chunk = self._member.decompress(data, min(STEP, self.limit - self.size + 1))
             except zlib.error as exc:
                 raise GzipBodyError(f"the body is not valid gzip (member {self.members + 1}): {exc}") from None
             self.size += len(chunk)
-            if self._member.unconsumed_tail or self.size > self.limit:
+            if self.size > self.limit:
                 raise InflatedTooLarge(f"inflated body exceeds the limit of {self.limit} bytes")
             out.append(chunk)
             if self._member.eof:
@@ -59,8 +64,8 @@ class GzipInflater:
                 self._member = None
                 self.members += 1
             else:
-                data = b""
-        return b"".join(out)
+                data = self._member.unconsumed_tail  # more of this member (the step was reached), or b""
+        return out
 
     def close(self) -> None:
         """Raise GzipBodyError unless the data ended exactly at the end of a member."""

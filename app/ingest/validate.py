@@ -10,7 +10,6 @@ errors, smaller deviations are normalised; the sign is made canonical (q0 >= 0).
 from __future__ import annotations
 
 import difflib
-import re
 from dataclasses import dataclass
 
 import numpy as np
@@ -19,12 +18,12 @@ import pyarrow as pa
 import pyarrow.compute as pc
 
 from app.ingest.errors import MAX_REPORTED, RowError, UploadError
+from app.names import valid_name
 from processing.attitude.rotations import quat_canonical, quat_conjugate
 from processing.streams import GNSS_SYSTEMS, QUATERNION_COLUMNS, SENSOR_COLUMN, TIME_COLUMN, StreamSpec
 from processing.time import timescales
 from storage.telemetry import arrow_schema
 
-SENSOR_NAME = re.compile(r"^[A-Za-z0-9_.\-]{1,64}$")
 ZONED_TIME = r"\d{2}:\d{2}:\d{2}(?:[.,]\d+)?\s*(?:[Zz]|[+-]\d{2}(?::?\d{2})?)\s*$"
 """An ISO 8601 time that ends in a zone designator ('Z', '+HH', '+HHMM', '+HH:MM' or '-'): a UTC time."""
 UTC_ZONES = ("UTC", "utc", "Z", "+00:00", "Etc/UTC")
@@ -243,7 +242,7 @@ class _Sensors:
 def _sensors(table: pa.Table, mapping: dict[str, str], policy: SensorPolicy, opts: UploadOptions,
              errors: _Errors) -> _Sensors:
     n = table.num_rows
-    if opts.sensor is not None and not SENSOR_NAME.match(opts.sensor):
+    if opts.sensor is not None and not valid_name(opts.sensor):
         errors.add(None, "sensor", f"invalid sensor name {opts.sensor!r} (letters, digits, _ . -)")
     if SENSOR_COLUMN in mapping:
         column = table.column(mapping[SENSOR_COLUMN])
@@ -268,7 +267,7 @@ def _sensors(table: pa.Table, mapping: dict[str, str], policy: SensorPolicy, opt
     for i, name in enumerate(names):
         if name == "":
             continue
-        if not SENSOR_NAME.match(name):
+        if not valid_name(name):
             errors.add_rows(np.flatnonzero(codes == i), SENSOR_COLUMN, f"invalid sensor name {name!r}")
         elif policy.allowed is not None and name not in policy.allowed:
             errors.add_rows(np.flatnonzero(codes == i), SENSOR_COLUMN,

@@ -85,7 +85,7 @@ class CatalogDispatcher(Generic[InFlight]):
         free = self.capacity() - len(self._running)
         if free > 0:
             with self.sessions() as session:
-                candidates = jobstore.queued_ids(session, free)
+                candidates = jobstore.fair_queued_ids(session, free, self.settings.jobs_per_key)
             for job_id in candidates:
                 with self.sessions.begin() as session:
                     claimed = jobstore.claim(session, job_id)

@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pyarrow as pa
+import pyarrow.compute as pc
 import pyarrow.csv as pacsv
 import pyarrow.parquet as pq
 
@@ -35,6 +36,30 @@ def jsonable(value: Any) -> Any:
     return value
 
 
+FORMULA_START = "=+-@\t\r"
+"""First characters that make a spreadsheet read a CSV cell as a formula (OWASP "CSV injection")."""
+
+
+def csv_cell(value: Any) -> Any:
+    """A text cell prefixed with ``'`` when it begins like a formula; other values as they are."""
+    return "'" + value if isinstance(value, str) and value[:1] in FORMULA_START and value else value
+
+
+def csv_safe(table: pa.Table) -> pa.Table:
+    """The table with every text cell that begins with ``= + - @``, a tab or a carriage return prefixed with
+    ``'`` (vectorised; numbers, including negative ones, are not text and stay as they are)."""
+    columns = []
+    for field, column in zip(table.schema, table.columns, strict=True):
+        kind = field.type.value_type if pa.types.is_dictionary(field.type) else field.type
+        if pa.types.is_string(kind) or pa.types.is_large_string(kind):
+            text = pc.cast(column, pa.large_string())
+            risky = pc.match_substring_regex(text, "^[=+\\-@\t\r]")
+            quote = pa.scalar("'", pa.large_string())
+            column = pc.if_else(risky, pc.binary_join_element_wise(quote, text, pa.scalar("", pa.large_string())), text)
+        columns.append(column)
+    return pa.table(columns, names=table.column_names)
+
+
 def table_to_arrow(columns: dict[str, Any]) -> pa.Table:
     """Columns -> Arrow; a ``time_tai_ns`` column gets an ISO UTC ``time`` column in front of it."""
     arrays: dict[str, Any] = {}
@@ -58,7 +83,7 @@ def write_outputs(store: ArtifactStore, job_id: str, result: TaskResult,
         out.append(store.write(job_id, f"{name}.parquet", buf.getvalue(), kind="table",
                                media_type="application/vnd.apache.parquet", description=f"table {name}"))
         buf = io.BytesIO()
-        pacsv.write_csv(table, buf)
+        pacsv.write_csv(csv_safe(table), buf)
         out.append(store.write(job_id, f"{name}.csv", buf.getvalue(), kind="table", media_type="text/csv",
                                description=f"table {name}"))
     for name, (content, media_type) in result.files.items():

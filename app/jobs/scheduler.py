@@ -38,8 +38,8 @@ from app.settings import Settings
 from app.version import __version__
 from processing.time import timescales
 from storage import schedules as schedstore
-from storage.models import Job, Schedule, ScheduleRun, SpacecraftConfig, TelemetryFile, utcnow
-from storage.reference import latest_covering
+from storage.models import Job, ReferenceDataset, Schedule, ScheduleRun, SpacecraftConfig, TelemetryFile, utcnow
+from storage.reference import latest_covering, usable_by
 
 log = logging.getLogger("attitude.scheduler")
 
@@ -54,9 +54,16 @@ class SkipTick(Exception):
     """The tick cannot submit a job; the message is stored with the run."""
 
 
-def check_cron(expr: str) -> str:
-    """Normalise and validate a cron expression (UTC); raises CronError."""
+MIN_PERIOD_S = 60.0  # default floor between ticks (ATTITUDE_MIN_SCHEDULE_PERIOD_S)
+_PERIOD_PROBE_TICKS = 130  # a six-field expression repeats its seconds pattern at least every minute
+
+
+def check_cron(expr: str, min_period_s: float = MIN_PERIOD_S) -> str:
+    """Normalise and validate a cron expression (UTC); raises CronError, also when two ticks come closer
+    than ``min_period_s`` (a six-field ``* * * * * *`` fires every second)."""
     expr = " ".join(expr.split())
+    if len(expr) > 200:
+        raise CronError(f"cron expression of {len(expr)} characters; at most 200")
     if not expr or not croniter.is_valid(expr):
         raise CronError(f"invalid cron expression {expr!r}: expected 5 fields (minute hour day month weekday), "
                         f"6 with seconds last, or @hourly/@daily/@weekly/@monthly/@yearly")
@@ -64,6 +71,13 @@ def check_cron(expr: str) -> str:
         next_tick(expr, utcnow())
     except (CroniterError, ValueError, OverflowError):
         raise CronError(f"cron expression {expr!r} never fires (e.g. a day that no month has)") from None
+    if len(expr.split()) == 6:  # seconds: five fields and @-names never fire more than once a minute
+        it = croniter(expr, utcnow())
+        ticks = [it.get_next(float) for _ in range(_PERIOD_PROBE_TICKS)]
+        gap = min(b - a for a, b in zip(ticks, ticks[1:], strict=False))
+        if gap < min_period_s:
+            raise CronError(f"cron expression {expr!r} fires every {gap:g} s; schedules may fire at most once "
+                            f"every {min_period_s:g} s (ATTITUDE_MIN_SCHEDULE_PERIOD_S)")
     return expr
 
 
@@ -148,8 +162,12 @@ def new_job(session: Session, schedule: Schedule, fire_at: dt.datetime) -> Job:
         if wanted == "none":
             continue
         if wanted is not None:
+            pinned = session.get(ReferenceDataset, wanted)
+            if pinned is None or not usable_by(pinned, schedule.spacecraft_id):
+                raise SkipTick(f"reference.{kind}: data set {wanted!r} does not exist or is not usable by this "
+                               "spacecraft")
             reference[kind] = wanted
-        elif (d := latest_covering(session, kind, start, end)) is not None:
+        elif (d := latest_covering(session, kind, start, end, spacecraft_id=schedule.spacecraft_id)) is not None:
             reference[kind] = d.id
     return Job(type=jt.name, spacecraft_id=schedule.spacecraft_id, config_version=int(version), start_tai_ns=start,
                end_tai_ns=end, params=params, status="queued", progress=0.0, stage="queued",

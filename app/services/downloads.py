@@ -11,7 +11,7 @@ import pyarrow as pa
 import pyarrow.csv as pacsv
 import pyarrow.parquet as pq
 
-from app.jobs.outputs import jsonable
+from app.jobs.outputs import csv_safe, jsonable
 from processing.streams import TIME_COLUMN
 from processing.time import timescales
 
@@ -45,8 +45,8 @@ def encode(table: pa.Table, fmt: str) -> bytes:
         return json.dumps(jsonable(table.to_pylist()), ensure_ascii=False, allow_nan=False, indent=None,
                           separators=(",", ":")).encode("utf-8")
     buf = io.BytesIO()
-    if fmt == "csv":
-        pacsv.write_csv(table, buf)
+    if fmt == "csv":  # text cells that a spreadsheet would run as formulas are prefixed with '
+        pacsv.write_csv(csv_safe(table), buf)
     else:
         pq.write_table(table, buf)
     return buf.getvalue()

@@ -39,3 +39,11 @@ class Unsupported(ServiceError):
 
 class Gone(ServiceError):
     """Recorded in the catalog but missing from the store."""
+
+
+class Forbidden(ServiceError):
+    """The caller's key may not do this, whatever the object (HTTP 403)."""
+
+
+class Busy(ServiceError):
+    """The caller has too much in progress (queued jobs): retry later (HTTP 429)."""

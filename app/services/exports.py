@@ -45,10 +45,10 @@ class OemRequest:
 
 
 def _inertial(session: Session, settings: Settings, frame: str, t: np.ndarray, r: np.ndarray,
-              v: np.ndarray) -> tuple[np.ndarray, np.ndarray, str]:
+              v: np.ndarray, spacecraft_id: int) -> tuple[np.ndarray, np.ndarray, str]:
     """ITRF states to ``frame`` with the newest EOP data set overlapping the window (zero EOP without one)."""
     eop = EarthOrientation()
-    dataset = latest_covering(session, EOP_KIND, int(t[0]), int(t[-1]))
+    dataset = latest_covering(session, EOP_KIND, int(t[0]), int(t[-1]), spacecraft_id=spacecraft_id)
     if dataset is not None:
         columns = ReferenceStore(settings.reference_url).columns(dataset)
         try:
@@ -75,7 +75,7 @@ def oem(session: Session, store: ParquetStore, settings: Settings, name: str, wh
     v = np.stack([table.column(c).to_numpy() for c in ("vx", "vy", "vz")], axis=-1)
     comments = [f"GNSS states of spacecraft {name}, receiver {sensors[0]}, exported by the attitude service"]
     if request.frame != "ITRF":
-        r, v, how = _inertial(session, settings, request.frame, t, r, v)
+        r, v, how = _inertial(session, settings, request.frame, t, r, v, sc.id)
         comments.append(how)
     segment = oem_segment(t, r, v, object_name=name, object_id=request.object_id, ref_frame=request.frame,
                           time_system=request.time_system, comments=tuple(comments))

@@ -19,12 +19,13 @@ from app.reports.inputs import retracted_by_job
 from app.reports.job_report import brief, report_json
 from app.reports.specs import parse as parse_specs
 from app.services.access import Principal
+from app.services.bounds import check_json_shape
 from app.services.downloads import StoredFile
-from app.services.errors import Conflict, Gone, Invalid, NotFound
+from app.services.errors import Busy, Conflict, Gone, Invalid, NotFound
 from app.services.pages import Page, page_of, paginate
 from app.services.spacecraft import get_spacecraft, latest_config
 from app.services.suggest import did_you_mean, field_errors
-from app.services.times import iso
+from app.services.times import check_bound, iso
 from app.settings import Settings
 from app.version import __version__
 from processing.time import timescales
@@ -34,7 +35,7 @@ from storage.jobs import ArtifactStore
 from storage.models import Artifact, Calibration, Job, ReferenceDataset, Spacecraft, TelemetryFile
 from storage.models import SpacecraftConfig as ConfigRow
 from storage.parquet_store import ParquetStore
-from storage.reference import latest_covering
+from storage.reference import latest_covering, usable_by
 
 
 class JobCreate(BaseModel):
@@ -91,7 +92,9 @@ def get_job_type(name: str) -> JobType:
 
 
 def validated_params(jt: JobType, params: dict[str, Any]) -> BaseModel:
-    """The job type's parameter model; Invalid with one error per bad field."""
+    """The job type's parameter model; Invalid with one error per bad field, or when the value's shape
+    exceeds :data:`app.services.bounds.PARAM_BOUNDS` (depth, items per list, string length)."""
+    check_json_shape(params, "params")
     try:
         return jt.params.model_validate(params)
     except ValidationError as exc:
@@ -104,9 +107,9 @@ def _time(value: str | float | None, scale: str, field: str) -> int | None:
         return None
     try:
         if isinstance(value, (int, float)):
-            return int(timescales.seconds_to_tai_ns(np.array([float(value)]), scale)[0])
-        return int(timescales.iso_to_tai_ns(np.array([value], dtype=object), scale)[0])
-    except timescales.TimeValueError as exc:
+            return check_bound(int(timescales.seconds_to_tai_ns(np.array([float(value)]), scale)[0]), field)
+        return check_bound(int(timescales.iso_to_tai_ns(np.array([value], dtype=object), scale)[0]), field)
+    except (timescales.TimeValueError, OverflowError) as exc:
         raise Invalid(f"{field}: {exc}") from None
 
 
@@ -147,9 +150,10 @@ def _window(session: Session, sc: Spacecraft, jt: JobType, body: JobCreate) -> t
     return lo, hi
 
 
-def _pick_reference(session: Session, jt: JobType, given: dict[str, str], start: int,
+def _pick_reference(session: Session, jt: JobType, sc: Spacecraft, given: dict[str, str], start: int,
                     end: int) -> dict[str, str]:
-    """Pin the reference data sets a job will use, so that reruns and reports are reproducible."""
+    """Pin the reference data sets a job will use, so that reruns and reports are reproducible: shared
+    ones or the spacecraft's own, never another spacecraft's."""
     unknown = sorted(set(given) - set(jt.reference))
     if unknown:
         raise Invalid(f"job {jt.name} uses no reference data of kind {', '.join(unknown)}"
@@ -161,10 +165,10 @@ def _pick_reference(session: Session, jt: JobType, given: dict[str, str], start:
             continue
         if wanted is not None:
             d = session.get(ReferenceDataset, wanted)
-            if d is None or d.kind != kind:
-                raise Invalid(f"reference.{kind}: no {kind} data set with id {wanted!r}")
+            if d is None or d.kind != kind or not usable_by(d, sc.id):
+                raise Invalid(f"reference.{kind}: no {kind} data set with id {wanted!r} for {sc.name}")
             chosen[kind] = d.id
-        elif (d := latest_covering(session, kind, start, end)) is not None:
+        elif (d := latest_covering(session, kind, start, end, spacecraft_id=sc.id)) is not None:
             chosen[kind] = d.id
     return chosen
 
@@ -192,14 +196,21 @@ def _pick_calibration(session: Session, jt: JobType, sc: Spacecraft, wanted: str
     return {} if cal is None else {CALIBRATION_PREFIX + kind: cal.id}
 
 
-def submit(session: Session, body: JobCreate, who: Principal, on_submit: Callable[[], None]) -> Job:
+def submit(session: Session, body: JobCreate, who: Principal, on_submit: Callable[[], None],
+           max_queued: int | None = None) -> Job:
     """Queue a job (``on_submit`` wakes the executor); its window, reference data and calibration are
-    fixed now."""
+    fixed now. Busy when the caller's key already has ``max_queued`` jobs waiting."""
+    if max_queued is not None:
+        waiting = session.scalar(select(func.count()).select_from(Job).where(
+            Job.api_key_id == who.key_id, Job.status == "queued")) or 0
+        if waiting >= max_queued:
+            raise Busy(f"this key has {waiting} queued jobs, the most it may have waiting "
+                       "(ATTITUDE_MAX_QUEUED_JOBS_PER_KEY); submit more when some have started")
     jt = get_job_type(body.type)
     params = validated_params(jt, body.params)
     sc = get_spacecraft(session, body.spacecraft, who)
     start, end = _window(session, sc, jt, body)
-    reference = _pick_reference(session, jt, body.reference, start, end)
+    reference = _pick_reference(session, jt, sc, body.reference, start, end)
     reference.update(_pick_calibration(session, jt, sc, body.calibration))
     if body.screened:
         reference[SCREENING_KEY] = _pick_screening(session, sc, start, end)

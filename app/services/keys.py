@@ -5,13 +5,14 @@ from __future__ import annotations
 import datetime as dt
 from dataclasses import dataclass
 
-from sqlalchemy import select
+from sqlalchemy import delete, select
 from sqlalchemy.orm import Session, object_session
 
+from app.names import has_control_characters
 from app.services.errors import Invalid, NotFound
 from app.services.pages import Page, page_of, paginate
 from storage.keys import create_key
-from storage.models import ApiKey, Spacecraft, utcnow
+from storage.models import ApiKey, Spacecraft, UiSession, utcnow
 
 
 @dataclass(frozen=True)
@@ -39,6 +40,8 @@ def describe(k: ApiKey) -> KeyInfo:
 def create(session: Session, name: str, role: str, expires_at: dt.datetime | None,
            spacecraft: list[str] | None) -> tuple[KeyInfo, str]:
     """A new key and its secret; ``spacecraft`` names the spacecraft it may use (None: all)."""
+    if has_control_characters(name) or not name.strip():
+        raise Invalid("the key name must be visible text without control characters (newlines, tabs, ...)")
     if expires_at is not None and expires_at.tzinfo is None:
         raise Invalid("expires_at needs a time zone (e.g. a trailing Z)")
     ids = None
@@ -70,5 +73,6 @@ def revoke(session: Session, key_id: str) -> KeyInfo:
         raise NotFound(f"API key {key_id!r} not found")
     if key.revoked_at is None:
         key.revoked_at = utcnow()
+        session.execute(delete(UiSession).where(UiSession.key_id == key.id))  # its UI sessions end with it
         session.commit()
     return describe(key)

@@ -32,13 +32,24 @@ def encode_cursor(created_at: dt.datetime, item_id: str) -> str:
     return base64.urlsafe_b64encode(f"{created_at.isoformat()}|{item_id}".encode()).decode().rstrip("=")
 
 
+MAX_CURSOR_CHARS = 200
+
+
 def decode_cursor(cursor: str) -> tuple[dt.datetime, str]:
+    """The (creation time, id) in a cursor; Invalid for anything :func:`encode_cursor` cannot have made
+    (garbage, a naive or out-of-range date, an id that is not one of ours)."""
+    bad = Invalid("invalid cursor; use the X-Next-Cursor value of the previous page")
+    if len(cursor) > MAX_CURSOR_CHARS:
+        raise bad
     try:
         raw = base64.urlsafe_b64decode(cursor + "=" * (-len(cursor) % 4)).decode()
-        when, item_id = raw.split("|", 1)
-        return dt.datetime.fromisoformat(when), item_id
+        when_text, item_id = raw.split("|", 1)
+        when = dt.datetime.fromisoformat(when_text)
     except (ValueError, UnicodeDecodeError):
-        raise Invalid("invalid cursor; use the X-Next-Cursor value of the previous page") from None
+        raise bad from None
+    if when.tzinfo is None or not item_id or len(item_id) > 64 or not item_id.isascii() or not item_id.isalnum():
+        raise bad
+    return when.astimezone(dt.UTC), item_id
 
 
 def paginate(query: Select[Any, *tuple[Any, ...]], created_at: InstrumentedAttribute[dt.datetime],

@@ -10,13 +10,15 @@ from sqlalchemy import select
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
-from app.jobs.scheduler import CronError, check_cron, next_tick
+from app.jobs.scheduler import MIN_PERIOD_S, CronError, check_cron, next_tick
+from app.names import has_control_characters
 from app.services.access import Principal
 from app.services.errors import Conflict, Invalid, NotFound
 from app.services.jobs import get_job_type, validated_params
 from app.services.spacecraft import get_spacecraft
 from storage import schedules as schedstore
-from storage.models import Schedule, ScheduleRun, Spacecraft, utcnow
+from storage.models import ReferenceDataset, Schedule, ScheduleRun, Spacecraft, utcnow
+from storage.reference import usable_by
 
 
 @dataclass(frozen=True)
@@ -44,10 +46,14 @@ def get_schedule(session: Session, id_or_name: str, who: Principal) -> tuple[Sch
     return s, sc
 
 
-def create(session: Session, spec: ScheduleSpec, who: Principal) -> tuple[Schedule, Spacecraft]:
-    """Store a schedule; its cron, job type, parameters and reference kinds are checked now."""
+def create(session: Session, spec: ScheduleSpec, who: Principal,
+           min_period_s: float = MIN_PERIOD_S) -> tuple[Schedule, Spacecraft]:
+    """Store a schedule; its cron (ticks at least ``min_period_s`` apart), job type, parameters and
+    reference kinds are checked now."""
+    if spec.name.strip(".") == "" or has_control_characters(spec.name):
+        raise Invalid(f"name: {spec.name!r} is not a schedule name (not only dots, no control characters)")
     try:
-        cron = check_cron(spec.cron)
+        cron = check_cron(spec.cron, min_period_s)
     except CronError as exc:
         raise Invalid(f"cron: {exc}") from None
     jt = get_job_type(spec.job_type)
@@ -56,6 +62,10 @@ def create(session: Session, spec: ScheduleSpec, who: Principal) -> tuple[Schedu
     if unknown:
         raise Invalid(f"job {jt.name} uses no reference data of kind {', '.join(unknown)}")
     sc = get_spacecraft(session, spec.spacecraft, who)
+    for kind, wanted in spec.reference.items():
+        pinned = session.get(ReferenceDataset, wanted) if wanted != "none" else None
+        if wanted != "none" and (pinned is None or pinned.kind != kind or not usable_by(pinned, sc.id)):
+            raise Invalid(f"reference.{kind}: no {kind} data set with id {wanted!r} for {sc.name}")
     if schedstore.find_schedule(session, spec.name) is not None:
         raise Conflict(f"a schedule named {spec.name!r} exists")
     schedule = schedstore.create_schedule(

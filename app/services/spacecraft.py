@@ -10,8 +10,9 @@ from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
 from app.config_schema import SpacecraftConfig
+from app.names import valid_name
 from app.services.access import Principal
-from app.services.errors import Conflict, NotFound
+from app.services.errors import Conflict, Invalid, NotFound
 from storage import calibrations
 from storage.models import Calibration, Job, Spacecraft, TelemetryFile
 from storage.models import SpacecraftConfig as ConfigRow
@@ -70,7 +71,10 @@ def _dump(config: SpacecraftConfig) -> dict[str, Any]:
 
 
 def create(session: Session, name: str, config: SpacecraftConfig, who: Principal) -> Configured:
-    """A new spacecraft with configuration version 1; Conflict when the name is taken."""
+    """A new spacecraft with configuration version 1; Invalid for a name that is not one
+    (:func:`app.config_schema.valid_name`), Conflict when the name is taken."""
+    if not valid_name(name):
+        raise Invalid(f"spacecraft name {name!r} must be 1-64 letters, digits, _ . - and not only dots")
     if session.scalar(select(Spacecraft.id).where(Spacecraft.name == name)) is not None:
         raise Conflict(f"spacecraft {name!r} already exists")
     sc = Spacecraft(name=name)

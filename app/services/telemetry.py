@@ -5,13 +5,14 @@ from __future__ import annotations
 from dataclasses import replace
 from typing import Any
 
+import numpy as np
 import pyarrow as pa
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from app.ingest.errors import RowError, UploadError
 from app.ingest.formats import Decoder, decoders
-from app.ingest.parse import UnsupportedMediaType, parse_body
+from app.ingest.parse import DecodeLimits, LimitExceeded, UnsupportedMediaType, parse_body
 from app.ingest.validate import SensorPolicy, UploadOptions, validate
 from app.services.access import Principal
 from app.services.errors import NotFound, TooLarge, Unsupported
@@ -19,9 +20,10 @@ from app.services.pages import Page, page_of, paginate
 from app.services.spacecraft import get_spacecraft
 from app.services.times import parse_window
 from processing.streams import STREAMS, StreamSpec
+from processing.units import NS_PER_DAY
 from storage.models import Ingest, Spacecraft
 from storage.parquet_store import ParquetStore
-from storage.telemetry import IngestMeta, commit_ingest, read_window
+from storage.telemetry import IngestMeta, TooManyRowsToRead, commit_ingest, read_window
 
 SINGLE_SENSOR_KINDS = {"gyro": "gyro", "magnetometer": "magnetometer", "sun_sensor": "sun_sensor"}
 
@@ -64,10 +66,10 @@ def upload_options(config: dict[str, Any], time_scale: str, sensor: str | None, 
 
 
 def _decode(body: bytes, content_type: str, spec: StreamSpec, fmt: str | None,
-            opts: UploadOptions) -> tuple[pa.Table, UploadOptions]:
+            opts: UploadOptions, limits: DecodeLimits) -> tuple[pa.Table, UploadOptions]:
     """The upload as a table of canonical upload columns, by ``format`` or by Content-Type."""
     if fmt is None or fmt == "table":
-        return parse_body(body, content_type), opts
+        return parse_body(body, content_type, limits), opts
     decoder = decoders().get(fmt)
     if decoder is None:
         raise UploadError([RowError(None, "format", f"unknown format {fmt!r}; formats: "
@@ -91,31 +93,40 @@ def _decode(body: bytes, content_type: str, spec: StreamSpec, fmt: str | None,
 
 def ingest_upload(session: Session, store: ParquetStore, sc: Spacecraft, spec: StreamSpec, body: bytes,
                   content_type: str, opts: UploadOptions, meta: IngestMeta, config: dict[str, Any],
-                  fmt: str | None, max_rows: int) -> tuple[Ingest, tuple[str, ...]]:
+                  fmt: str | None, max_rows: int, max_days: int = 1000) -> tuple[Ingest, tuple[str, ...]]:
     """Decode, validate and store one upload; all or nothing (blocking: run it off the event loop).
 
     Returns the ingest record and the notes of a file-format decoder. Raises UploadError (invalid rows),
     Unsupported (media type), TooManyRows or storage.telemetry.ConflictError (rows differ from stored
     samples); nothing is stored then."""
     try:
-        table, opts = _decode(body, content_type, spec, fmt, opts)
+        table, opts = _decode(body, content_type, spec, fmt, opts, DecodeLimits(max_rows=max_rows))
     except UnsupportedMediaType as exc:
         raise Unsupported(str(exc)) from None
+    except LimitExceeded as exc:
+        raise TooManyRows(str(exc)) from None
     if table.num_rows > max_rows:
         raise TooManyRows(f"{table.num_rows} rows exceed the limit of {max_rows} rows per upload; split the upload")
     checked = validate(table, spec, sensor_policy(spec, config), opts)
+    days = np.unique(np.floor_divide(checked.table.column("time_tai_ns").to_numpy(), NS_PER_DAY)).size
+    if days > max_days:  # one Parquet file per TAI day: bound the files (and catalog rows) of one upload
+        raise TooManyRows(f"the rows fall on {days} different days; at most {max_days} days per upload "
+                          "(ATTITUDE_MAX_UPLOAD_DAYS): split the upload")
     record = commit_ingest(session, store, sc.id, spec, checked.table, checked.row_index, meta)
     return record, opts.notes  # notes: what a file-format decoder did (frames, units)
 
 
 def read(session: Session, store: ParquetStore, name: str, stream: str, who: Principal, start: str | None,
-         end: str | None, time_scale: str, sensor: str | None = None) -> pa.Table:
+         end: str | None, time_scale: str, sensor: str | None = None, max_rows: int | None = None) -> pa.Table:
     """Stored samples of one stream in [start, end] (ISO 8601 or seconds since 1970 on ``time_scale``),
-    sorted by sensor and time, without duplicates."""
+    sorted by sensor and time, without duplicates; TooLarge when the window holds more than ``max_rows``."""
     spec = get_stream(stream)
     sc = get_spacecraft(session, name, who)
     t0, t1 = parse_window(start, end, time_scale)
-    return read_window(session, store, sc.id, spec, t0, t1, sensor)
+    try:
+        return read_window(session, store, sc.id, spec, t0, t1, sensor, max_rows=max_rows)
+    except TooManyRowsToRead as exc:
+        raise TooLarge(str(exc)) from None
 
 
 def list_ingests(session: Session, name: str, who: Principal, stream: str | None, cursor: str | None,

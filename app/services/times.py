@@ -7,6 +7,19 @@ import numpy as np
 from app.services.errors import Invalid
 from processing.time import timescales
 
+EARLIEST_ISO, LATEST_ISO = "1972-01-01T00:00:00Z", "2100-01-01T00:00:00Z"
+EARLIEST_TAI_NS, LATEST_TAI_NS = (int(t) for t in timescales.iso_to_tai_ns(
+    np.array([EARLIEST_ISO, LATEST_ISO], dtype=object), "utc"))
+"""Request times (windows of reads and jobs) lie in [1972-01-01, 2100-01-01) UTC: before 1972 UTC had
+no integer offset from TAI; a later bound only makes unbounded windows (and their work) possible."""
+
+
+def check_bound(tai_ns: int, field: str) -> int:
+    """``tai_ns`` if it lies in the supported range; Invalid("<field>: ...") otherwise."""
+    if not EARLIEST_TAI_NS <= tai_ns < LATEST_TAI_NS:
+        raise Invalid(f"{field}: times must lie between {EARLIEST_ISO} and {LATEST_ISO} (UTC)")
+    return tai_ns
+
 
 def parse_bound(value: str | None, scale: str, field: str) -> int | None:
     """A window bound: None or "" -> None; a number -> seconds since 1970 on ``scale``; else ISO 8601.
@@ -18,9 +31,9 @@ def parse_bound(value: str | None, scale: str, field: str) -> int | None:
         try:
             seconds = float(value)
         except ValueError:
-            return int(timescales.iso_to_tai_ns(np.array([value], dtype=object), scale)[0])
-        return int(timescales.seconds_to_tai_ns(np.array([seconds]), scale)[0])
-    except timescales.TimeValueError as exc:
+            return check_bound(int(timescales.iso_to_tai_ns(np.array([value], dtype=object), scale)[0]), field)
+        return check_bound(int(timescales.seconds_to_tai_ns(np.array([seconds]), scale)[0]), field)
+    except (timescales.TimeValueError, OverflowError) as exc:
         raise Invalid(f"{field}: {exc}") from None
 
 

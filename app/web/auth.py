@@ -1,10 +1,12 @@
-"""Web UI sign-in: the API key in a session cookie, the same roles and grants as the API.
+"""Web UI sign-in: an API key opens a server-side session; the same roles and grants as the API.
 
-The cookie holds the key's secret (HttpOnly, SameSite=Lax, Secure over https, path /ui, no expiry
-date: it ends with the browser session). Every request looks the key up again with
-``storage.keys.find_active``, so revoking or expiring a key signs its sessions out at once; the caller
-becomes the same :class:`app.services.access.Principal` the API builds, and is held to the same per-key rate
-limit. Forms that change something carry a token derived from the secret (checked with
+Signing in with a key creates a session (:func:`storage.keys.start_session`): the cookie holds only its
+random id (HttpOnly, SameSite=Lax, Secure over https, path /ui, no expiry date: it ends with the browser
+session), the catalog the id's SHA-256, the key and an expiry (``ATTITUDE_UI_SESSION_S``, default 12 h).
+The key itself never leaves the sign-in form. Every request looks the session and its key up again, so
+an expired session, signing out, or revoking or expiring the key ends it at once; the caller becomes the
+same :class:`app.services.access.Principal` the API builds, and is held to the same per-key rate limit.
+Forms that change something carry a token derived from the session id (checked with
 ``hmac.compare_digest``), and requests a browser marks as cross-site (``Sec-Fetch-Site``) are refused.
 """
 
@@ -18,8 +20,8 @@ from typing import Annotated
 from fastapi import Depends, HTTPException, Request, status
 
 from app.api.middleware import retry_after_header
-from app.services.access import Principal, identify
-from storage.keys import role_at_least
+from app.services.access import Principal
+from storage.keys import end_session, find_active, find_session_key, granted_spacecraft, role_at_least, start_session
 
 COOKIE = "attitude_session"
 COOKIE_PATH = "/ui"
@@ -30,20 +32,38 @@ class LoginRequired(Exception):
 
 
 def session_secret(request: Request) -> str | None:
+    """The session id in the cookie (not a key: a key there opens nothing)."""
     return request.cookies.get(COOKIE) or None
 
 
-def principal_from_secret(request: Request, secret: str) -> Principal | None:
+def start_ui_session(request: Request, secret: str) -> str | None:
+    """Sign in with the API key ``secret``: a new session id, or None for a key that is not active."""
+    with request.app.state.sessions.begin() as session:
+        key = find_active(session, secret)
+        if key is None:
+            return None
+        return start_session(session, key, request.app.state.settings.ui_session_s)
+
+
+def end_ui_session(request: Request) -> None:
+    token = session_secret(request)
+    if token is not None:
+        with request.app.state.sessions.begin() as session:
+            end_session(session, token)
+
+
+def principal_from_session(request: Request, token: str) -> Principal | None:
     with request.app.state.sessions() as session:
-        return identify(session, secret)
+        key = find_session_key(session, token)
+        return None if key is None else Principal(key.id, key.name, key.role, granted_spacecraft(key))
 
 
 def current_principal(request: Request) -> Principal | None:
     """The signed-in caller, or None; 429 when the key is over its rate limit (as in the API)."""
-    secret = session_secret(request)
-    if secret is None:
+    token = session_secret(request)
+    if token is None:
         return None
-    principal = principal_from_secret(request, secret)
+    principal = principal_from_session(request, token)
     if principal is None:
         return None
     wait = request.app.state.rate_limiter.acquire(principal.key_id)
@@ -76,7 +96,7 @@ WebAdmin = Annotated[Principal, Depends(require("admin"))]
 
 
 def csrf_token(secret: str) -> str:
-    """The form token of a session: an HMAC of a fixed label under the key's secret."""
+    """The form token of a session: an HMAC of a fixed label under the session id."""
     return hmac.new(secret.encode(), b"attitude-web-form", hashlib.sha256).hexdigest()
 
 

@@ -119,7 +119,8 @@ def submit_job(request: Request, session: SessionDep, who: WebOperator, type: An
     try:
         body = JobCreate(type=type, spacecraft=spacecraft, start=start.strip() or None, end=end.strip() or None,
                          time_scale=time_scale, params=parsed_params, reference=parsed_reference)
-        job = jobs.submit(session, body, who, on_submit=request.app.state.executor.wake)
+        job = jobs.submit(session, body, who, on_submit=request.app.state.executor.wake,
+                          max_queued=request.app.state.settings.max_queued_jobs_per_key)
     except ValidationError as exc:
         return _new_form(request, session, who, values, 422, "invalid job request",
                          [{"column": ".".join(str(p) for p in e["loc"]), "message": e["msg"]} for e in exc.errors()],

@@ -17,7 +17,8 @@ from pydantic import ValidationError
 
 from app.api.deps import SessionDep, StoreDep
 from app.api.errors import http_status
-from app.config_schema import NAME, SpacecraftConfig
+from app.config_schema import SpacecraftConfig
+from app.names import valid_name
 from app.services import ingests, jobs, schedules
 from app.services import spacecraft as spacecraft_service
 from app.services.errors import ServiceError
@@ -75,7 +76,7 @@ def create_spacecraft(request: Request, session: SessionDep, who: WebAdmin, name
     check_form(request, csrf)
     name = name.strip()
     parsed, errors = _parse_config(config)
-    if not NAME.match(name):
+    if not valid_name(name):
         errors.insert(0, {"row": None, "column": "name", "message": f"1-64 letters, digits, _ . - ; got {name!r}"})
     if errors or parsed is None:
         return _config_form(request, mode="create", name=name, text=config, errors=errors, status_code=422,
@@ -175,7 +176,7 @@ def create_schedule(request: Request, session: SessionDep, who: WebOperator, nam
                 raise ValueError
         except ValueError:
             errors.append({"row": None, "column": "window_s", "message": "a whole number of seconds, 1 .. 31622400"})
-    if not NAME.match(values["name"]):
+    if not valid_name(values["name"]):
         errors.append({"row": None, "column": "name", "message": "1-64 letters, digits, _ . -"})
     if window not in WINDOWS:
         errors.append({"row": None, "column": "window", "message": f"one of {', '.join(WINDOWS)}"})
@@ -184,7 +185,8 @@ def create_schedule(request: Request, session: SessionDep, who: WebOperator, nam
     try:
         s, _ = schedules.create(session, ScheduleSpec(
             name=values["name"], cron=values["cron"], job_type=type, spacecraft=spacecraft, params=parsed,
-            reference={}, window=window, window_s=seconds, enabled=enabled == "true"), who)
+            reference={}, window=window, window_s=seconds, enabled=enabled == "true"), who,
+            min_period_s=request.app.state.settings.min_schedule_period_s)
     except ServiceError as exc:
         detail = exc.detail
         if isinstance(detail, dict):

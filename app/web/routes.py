@@ -10,6 +10,7 @@ from __future__ import annotations
 import csv
 import hashlib
 import io
+import math
 import urllib.parse
 from typing import Annotated, Any
 
@@ -20,7 +21,9 @@ from fastapi.responses import FileResponse, HTMLResponse, RedirectResponse, Resp
 from app.api.deps import SessionDep, StoreDep
 from app.api.errors import http_status
 from app.api.files import download_response
+from app.api.gate import client_address
 from app.ingest.errors import UploadError
+from app.jobs.outputs import csv_cell
 from app.reports import specs as speclib
 from app.reports import trends as trendlib
 from app.services import coverage, ingests, jobs, telemetry, trends
@@ -36,7 +39,8 @@ from app.web.auth import (
     WebViewer,
     check_form,
     check_same_site,
-    principal_from_secret,
+    end_ui_session,
+    start_ui_session,
 )
 from app.web.render import STATIC, HtmlRoute, page
 from processing.streams import STREAMS
@@ -82,12 +86,19 @@ def login(request: Request, api_key: Annotated[str, Form()] = "",
           next: Annotated[str | None, Form()] = None) -> Response:
     check_same_site(request)
     secret = api_key.strip()
-    principal = principal_from_secret(request, secret) if secret else None
-    if principal is None:
+    address = client_address(request.scope)
+    throttle = request.app.state.auth_throttle
+    if (wait := throttle.wait(address)) > 0:
+        return page(request, "login.html", status_code=429, next=_safe_next(next),
+                    error=f"Too many failed sign-ins from this address; try again in {math.ceil(wait)} s.")
+    token = start_ui_session(request, secret) if secret else None
+    if token is None:
+        if secret:
+            throttle.failed(address)
         return page(request, "login.html", status_code=401, next=_safe_next(next),
                     error="This API key is not valid (unknown, expired or revoked).")
     response = RedirectResponse(_safe_next(next), status_code=303)
-    response.set_cookie(COOKIE, secret, path=COOKIE_PATH, httponly=True, samesite="lax",
+    response.set_cookie(COOKIE, token, path=COOKIE_PATH, httponly=True, samesite="lax",
                         secure=request.url.scheme == "https")
     return response
 
@@ -95,6 +106,7 @@ def login(request: Request, api_key: Annotated[str, Form()] = "",
 @router.post("/logout")
 def logout(request: Request) -> RedirectResponse:
     check_same_site(request)
+    end_ui_session(request)
     response = RedirectResponse("/ui/login", status_code=303)
     response.delete_cookie(COOKIE, path=COOKIE_PATH, httponly=True, samesite="lax",
                            secure=request.url.scheme == "https")
@@ -182,7 +194,8 @@ async def upload(request: Request, name: str, session: SessionDep, store: StoreD
     try:
         rec, _notes = await run_in_threadpool(
             telemetry.ingest_upload, session, store, sc, spec, body, content_type, opts, meta, config,
-            (format or None) if format != "table" else None, request.app.state.settings.max_upload_rows)
+            (format or None) if format != "table" else None, request.app.state.settings.max_upload_rows,
+            request.app.state.settings.max_upload_days)
     except UploadError as exc:
         return page(request, "upload_result.html", status_code=422,
                     message=f"upload rejected, nothing stored: {exc}",
@@ -219,7 +232,7 @@ def trends_csv(name: str, session: SessionDep, who: WebViewer, type: str | None 
               "sigma"]
     writer = csv.DictWriter(buf, fieldnames=fields, lineterminator="\n")
     writer.writeheader()
-    writer.writerows(trendlib.rows(sel.trends))
+    writer.writerows({k: csv_cell(v) for k, v in row.items()} for row in trendlib.rows(sel.trends))
     return Response(buf.getvalue(), media_type="text/csv",
                     headers={"Content-Disposition": f'attachment; filename="{sel.spacecraft.name}_trends.csv"',
                              "Cache-Control": "no-store"})

@@ -168,3 +168,56 @@ def test_admin_keys_cannot_be_restricted_and_unknown_spacecraft_are_refused(clie
     assert r.status_code == 422 and "Z" in r.json()["detail"]
     listed = {k["name"]: k for k in client.get("/api/v1/keys").json()}
     assert listed["viewer-1"]["spacecraft"] == ["A"]
+
+
+ORBIT = "# frame: ITRF\ntime,x,y,z,vx,vy,vz\n" + "".join(
+    f"2023-06-01T00:00:0{i}Z,7000000,{7500 * i},0,0,7500,0\n" for i in range(4))
+
+
+def _as(secret):
+    return {"Authorization": f"Bearer {secret}"}
+
+
+def test_reference_data_follow_spacecraft_grants(client):
+    """The red team's case: an operator granted only A uploaded a reference orbit that B's next
+    data_screening job picked up. Now: reference data are scoped to a spacecraft the key is granted, and
+    only an admin uploads data shared by every spacecraft."""
+    for sc in ("A", "B"):
+        make_spacecraft(client, sc, {})
+        assert upload(client, "gnss", ORBIT.split("\n", 1)[1], sc=sc).status_code == 201
+    keys, _ = issue_keys(client)
+    op_a = _as(keys["operator_A"])
+    post = "/api/v1/reference/reference_orbit"
+    r = client.post(post, content=ORBIT.encode(), headers=op_a)  # shared: not for an operator
+    assert r.status_code == 403 and "admin" in r.json()["detail"]
+    assert client.post(post, content=ORBIT.encode(), params={"spacecraft": "B"}, headers=op_a).status_code == 404
+    r = client.post(post, content=ORBIT.encode(), params={"spacecraft": "A"}, headers=op_a)
+    assert r.status_code == 201 and r.json()["spacecraft"] == "A"
+    own_a = r.json()["id"]
+    assert client.get("/api/v1/reference").json()[0]["spacecraft"] == "A"  # admins see everything
+
+    def picked(sc, **extra):
+        r = client.post("/api/v1/jobs", json={"type": "data_screening", "spacecraft": sc, **extra})
+        return r.status_code, (client.get(f"/api/v1/jobs/{r.json()['id']}").json()["reference"]
+                               if r.status_code == 202 else r.json())
+
+    assert picked("A")[1].get("reference_orbit") == own_a
+    assert "reference_orbit" not in picked("B")[1]  # B's jobs never pick up A's data
+    status, body = picked("B", reference={"reference_orbit": own_a})  # nor when named explicitly
+    assert status == 422 and "for B" in body["detail"]
+    r = client.post("/api/v1/schedules", json={"name": "b-screen", "cron": "0 2 * * *", "type": "data_screening",
+                                               "spacecraft": "B", "reference": {"reference_orbit": own_a}})
+    assert r.status_code == 422, r.text
+
+    shared = client.post(post, content=ORBIT.encode()).json()  # the admin's shared data set
+    assert shared["spacecraft"] is None
+    assert picked("B")[1].get("reference_orbit") == shared["id"]
+    # who sees what: B's key never sees A's data set; everyone sees the shared one
+    b_viewer = client.post("/api/v1/keys", json={"name": "vb", "role": "viewer", "spacecraft": ["B"]}).json()["secret"]
+    seen = {d["id"] for d in client.get("/api/v1/reference", headers=_as(b_viewer)).json()}
+    assert seen == {shared["id"]}
+    for path in (f"/api/v1/reference/reference_orbit/{own_a}", f"/api/v1/reference/reference_orbit/{own_a}/data"):
+        assert client.get(path, headers=_as(b_viewer)).status_code == 404
+        assert client.get(path, headers=_as(keys["viewer_A"])).status_code == 200
+    assert {d["id"] for d in client.get("/api/v1/reference", headers=_as(keys["viewer_A"])).json()} == {
+        own_a, shared["id"]}

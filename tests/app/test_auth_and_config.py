@@ -107,3 +107,58 @@ def test_upload_checks_against_current_configuration(client):
     make_spacecraft(client, config={})
     r = upload(client, "star_tracker", "time,q0,q1,q2,q3\n2023-06-01T00:00:00Z,1,0,0,0\n")
     assert r.status_code == 422 and "no star tracker is configured" in r.json()["errors"][0]["message"]
+
+
+def _near_valid(secret: str) -> list[str]:
+    """Authorization values that are almost those of a valid key."""
+    return [f"Bearer {secret} ", f"Bearer  {secret}", f"Bearer {secret[:-1]}", f"Bearer {secret}x",
+            f"Bearer {secret.upper()}", f"Basic {secret}", secret, f"Bearer {secret}\t", f"Bearer {secret},x"]
+
+
+def test_authentication_comes_first_on_every_route(client):
+    """Over the whole route table, with near-valid tokens and a request that would fail every other check
+    (bad content type, unparsable and over-deep body, unknown query parameters, a path that names nothing):
+    always 401 (the red team's case: a token with a trailing space on an upload answered 415)."""
+    from tests.app.test_access_control import app_routes
+
+    make_spacecraft(client)
+    secret = new_key(client, "admin")
+    routes = [(m, p) for m, p in app_routes(client) if p.startswith("/api/")]
+    assert len(routes) > 30
+    body = b"[" * 5000 + b"\xff"
+    checked = 0
+    for method, path in routes:
+        filled = (path.replace("{name}", "sat1").replace("{stream}", "gyro").replace("{job_id}", "nosuch")
+                  .replace("{kind}", "eop").replace("{dataset_id}", "x").replace("{key_id}", "x")
+                  .replace("{ingest_id}", "x").replace("{file_id}", "x").replace("{schedule}", "x"))
+        for value in _near_valid(secret):
+            r = client.request(method, filled, content=body, params={"bogus": "1", "cursor": "!!"},
+                               headers={"Authorization": value, "Content-Type": "text/plain",
+                                        "Content-Encoding": "br"})
+            assert r.status_code == 401, (method, path, value, r.status_code, r.text[:200])
+            assert r.json()["detail"] and r.headers["www-authenticate"] == "Bearer"
+            checked += 1
+    assert checked == len(routes) * len(_near_valid(secret))
+    r = client.post("/api/v1/spacecraft/sat1/telemetry/gyro", content=b"x",
+                    headers={"Authorization": f"Bearer {secret}", "Content-Type": "text/plain"})
+    assert r.status_code == 415  # the same request with the exact key gets as far as its content type
+    assert client.get("/api/v1/spacecraft/sat1/ingests").json() == []
+
+
+def test_failed_authentications_are_throttled_per_address(settings):
+    from dataclasses import replace
+
+    from fastapi.testclient import TestClient
+
+    from app.main import create_app
+
+    app = create_app(replace(settings, auth_failures_per_minute=5))
+    with TestClient(app) as client, TestClient(app, client=("10.0.0.2", 5000)) as other:
+        good = {"Authorization": f"Bearer {settings.bootstrap_token}"}
+        statuses = [client.get("/api/v1/spacecraft", headers={"Authorization": f"Bearer att_guess{i}"}).status_code
+                    for i in range(7)]
+        assert statuses[:5] == [401] * 5 and statuses[5:] == [429, 429]
+        r = client.get("/api/v1/spacecraft", headers=good)  # while throttled, even a valid key is not looked at
+        assert r.status_code == 429 and int(r.headers["retry-after"]) >= 1 and "failed authentications" in r.text
+        assert other.get("/api/v1/spacecraft", headers=good).status_code == 200  # another address is not
+        assert client.get("/api/v1/spacecraft", headers={"Authorization": ""}).status_code == 429

@@ -89,3 +89,34 @@ def test_export_errors(api):
     assert r.status_code == 422 and "before start" in r.text
     assert api.get("/api/v1/spacecraft/sat1/export/oem", params={"frame": "TEME"}).status_code == 422
     assert api.get("/api/v1/spacecraft/sat1/export/oem", headers={"Authorization": ""}).status_code == 401
+
+
+def test_csv_cells_that_start_like_formulas_are_neutralised():
+    import csv
+    import io
+
+    import pyarrow as pa
+    import pyarrow.csv as pacsv
+
+    from app.jobs.outputs import csv_cell, csv_safe
+
+    values = ["=HYPERLINK(\"x\")", "+1", "-2+3", "@SUM(A1)", "\tx", "\rx", "a=b", "", None, "ok", "'=x"]
+    table = pa.table({"text": values, "number": [-1.5] * len(values),
+                      "dict": pa.array(values).dictionary_encode()})
+    buf = io.BytesIO()
+    pacsv.write_csv(csv_safe(table), buf)
+    rows = list(csv.reader(io.StringIO(buf.getvalue().decode(), newline="")))[1:]
+    expected = ["'" + v if v and v[0] in "=+-@\t\r" else (v or "") for v in values]
+    assert [r[0] for r in rows] == expected and [r[2] for r in rows] == expected
+    assert {r[1] for r in rows} == {"-1.5"}  # numbers are not text: negative ones stay numbers
+    assert [csv_cell(v) for v in values] == ["'" + v if v and v[0] in "=+-@\t\r" else v for v in values]
+    assert csv_cell(-3) == -3
+
+
+def test_telemetry_csv_download_neutralises_sensor_names(client):
+    make_spacecraft(client, config={})
+    r = upload(client, "gyro", "time,wx,wy,wz\n2023-06-01T00:00:00Z,1,2,3\n", sensor="-x")
+    assert r.status_code == 201, r.text
+    csv_text = client.get("/api/v1/spacecraft/sat1/telemetry/gyro").text
+    assert "'-x" in csv_text.splitlines()[1]
+    assert client.get("/api/v1/spacecraft/sat1/telemetry/gyro", params={"format": "json"}).json()[0]["sensor"] == "-x"

@@ -153,8 +153,13 @@ def test_stage_selection_failure_and_continue(stages, inputs, monkeypatch):
     assert "orbital_attitude failed: no orbit in the window" in result.notes
     with pytest.raises(TaskError, match="unknown stages"):
         reconstruction.run(inputs, reconstruction.Params(stages=["astrology"]), lambda f, s: None)
+    with pytest.raises(ValueError, match="data_screening: x: Extra inputs"):  # refused at submission (issue 22)
+        reconstruction.Params(stage_params={"data_screening": {"x": 1}})
+    stored_before = reconstruction.Params.model_construct(  # params stored before that check: refused at run time
+        stages=None, stage_params={"data_screening": {"x": 1}}, calibrate_alignment=None, apply_screening=True,
+        apply_gyro_bias=True, continue_on_error=False)
     with pytest.raises(TaskError, match="stage_params.data_screening"):
-        reconstruction.run(inputs, reconstruction.Params(stage_params={"data_screening": {"x": 1}}), lambda f, s: None)
+        reconstruction.run(inputs, stored_before, lambda f, s: None)
 
 
 def test_pipeline_job_end_to_end_with_one_combined_report(stages, settings, scenario):

@@ -150,7 +150,7 @@ class FastClock:
 
 
 def _two_instances(settings):
-    fast = replace(settings, scheduler_poll_s=0.02, max_jobs=1)
+    fast = replace(settings, scheduler_poll_s=0.02, max_jobs=1, min_schedule_period_s=1)  # seconds crons allowed
     return open_client(fast), open_client(fast)
 
 

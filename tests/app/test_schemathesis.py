@@ -44,7 +44,8 @@ def _call(base, method, path, body=None, content_type="application/json"):
 def api_schema():
     with tempfile.TemporaryDirectory() as tmp:
         env = {"ATTITUDE_DATA_DIR": tmp, "ATTITUDE_BOOTSTRAP_TOKEN": TOKEN, "ATTITUDE_DATABASE_URL": "",
-               "ATTITUDE_RATE_LIMIT_PER_MINUTE": "1000000", "ATTITUDE_MAX_JOBS": "1"}
+               "ATTITUDE_RATE_LIMIT_PER_MINUTE": "1000000", "ATTITUDE_AUTH_FAILURES_PER_MINUTE": "1000000",
+               "ATTITUDE_MAX_JOBS": "1"}
         with running_server(env) as base:
             _call(base, "POST", "/api/v1/spacecraft", json.dumps({"name": "sat1"}).encode())
             csv = "time,wx,wy,wz\n" + "".join(f"2023-06-01T00:00:{i:02d}Z,1,2,3\n" for i in range(10))

@@ -51,7 +51,8 @@ def service(tmp_path_factory: pytest.TempPathFactory, browser_tools: None) -> It
     root = shared.data_dir.parent
     token = "web-admin-" + secrets.token_urlsafe(12)
     env = {"ATTITUDE_DATA_DIR": str(shared.data_dir), "ATTITUDE_BOOTSTRAP_TOKEN": token,
-           "ATTITUDE_DATABASE_URL": "", "ATTITUDE_MAX_JOBS": "2", "ATTITUDE_SCHEDULER": "0"}
+           "ATTITUDE_DATABASE_URL": "", "ATTITUDE_MAX_JOBS": "2", "ATTITUDE_SCHEDULER": "0",
+           "ATTITUDE_MAX_JOBS_PER_KEY": "2"}  # the browser tests share one admin key
     with running_server(env, log_path=root / "server.log") as base:
         api = ApiClient(base, token)
         api.post("/api/v1/spacecraft", {"name": UPLOAD_TARGET, "config": {}})

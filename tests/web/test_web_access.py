@@ -44,14 +44,26 @@ def fill(path: str, sc: str, world) -> str:
             .replace("{schedule_id}", "nosuch"))
 
 
+def session_of(client, secret: str) -> str:
+    """The session id a sign-in with the key ``secret`` gives (cached per client); for a key that cannot
+    sign in (revoked, expired), the key itself, so that the cookie holds something a browser might send."""
+    cache = client.__dict__.setdefault("_ui_sessions", {})
+    if secret not in cache:
+        r = client.post("/ui/login", data={"api_key": secret}, headers={"Authorization": ""}, follow_redirects=False)
+        cache[secret] = r.cookies.get(COOKIE) if r.status_code == 303 else secret
+        client.cookies.clear()
+    return cache[secret]
+
+
 def call(client, method: str, path: str, secret: str | None, sc: str = "A", token: bool = True, **headers):
     """A browser-like request: the session cookie (no Authorization header) and the form token."""
     h = {"Authorization": "", **headers}
-    if secret:
-        h["Cookie"] = f"{COOKIE}={secret}"
+    sid = session_of(client, secret) if secret else None
+    if sid:
+        h["Cookie"] = f"{COOKIE}={sid}"
     kwargs: dict = {}
     if method == "POST":
-        data = {"csrf": csrf_token(secret) if secret and token else ""}
+        data = {"csrf": csrf_token(sid) if sid and token else ""}
         if path == "/ui/jobs":
             data.update(type="executor_check", spacecraft=sc)
         elif path.endswith("/upload"):
@@ -128,8 +140,9 @@ def test_forms_need_the_session_token_and_same_site(client, world):
     assert call(client, "POST", "/ui/jobs", op, **{"Sec-Fetch-Site": "same-origin"}).status_code == 303
     assert call(client, "POST", "/ui/login", op, **{"Sec-Fetch-Site": "cross-site"}).status_code == 403
     other = world["keys"]["admin"]
-    r = client.post("/ui/jobs", headers={"Authorization": "", "Cookie": f"{COOKIE}={op}"}, follow_redirects=False,
-                    data={"type": "executor_check", "spacecraft": "A", "csrf": csrf_token(other)})
+    r = client.post("/ui/jobs", headers={"Authorization": "", "Cookie": f"{COOKIE}={session_of(client, op)}"},
+                    follow_redirects=False,
+                    data={"type": "executor_check", "spacecraft": "A", "csrf": csrf_token(session_of(client, other))})
     assert r.status_code == 403  # another session's token
 
 
@@ -165,3 +178,65 @@ def test_pages_are_not_cached_and_carry_the_csp(client, world):
     assert r.headers["cache-control"] == "no-store"
     assert "script-src 'self'" in r.headers["content-security-policy"]
     assert '<script src="/ui/static/app.js' in r.text and "<script>" not in r.text
+
+
+def test_the_session_cookie_is_an_opaque_server_side_session(settings):
+    """The cookie holds a random session id, not the key; the session ends on sign-out, on expiry and when
+    the key is revoked; a key put into the cookie opens nothing."""
+    import datetime as dt
+
+    from fastapi.testclient import TestClient
+
+    from app.main import create_app
+    from storage.models import UiSession
+
+    with TestClient(create_app(settings)) as client:
+        client.headers["Authorization"] = f"Bearer {settings.bootstrap_token}"
+        created = client.post("/api/v1/keys", json={"name": "ui", "role": "viewer"}).json()
+        sid = session_of(client, created["secret"])
+        assert sid and sid != created["secret"] and created["secret"] not in sid
+        assert call(client, "GET", "/ui/", created["secret"]).status_code == 200
+        raw = client.get("/ui/", headers={"Authorization": "", "Cookie": f"{COOKIE}={created['secret']}"},
+                         follow_redirects=False)
+        assert is_login_redirect(raw)  # the key itself is no session
+        with client.app.state.sessions() as s:  # only the digest is stored
+            stored = [row.token_sha256 for row in s.query(UiSession)]
+            assert sid not in stored and len(stored) == 1
+
+        def page_with(token):
+            return client.get("/ui/", headers={"Authorization": "", "Cookie": f"{COOKIE}={token}"},
+                              follow_redirects=False)
+
+        assert page_with(sid).status_code == 200
+        r = client.post("/ui/logout", headers={"Authorization": "", "Cookie": f"{COOKIE}={sid}"},
+                        follow_redirects=False)
+        assert r.status_code == 303 and is_login_redirect(page_with(sid))  # ended on the server too
+        client.cookies.clear()
+        client.__dict__.pop("_ui_sessions")
+        sid = session_of(client, created["secret"])
+        with client.app.state.sessions.begin() as s:  # expiry
+            for row in s.query(UiSession):
+                row.expires_at = dt.datetime.now(dt.UTC) - dt.timedelta(seconds=1)
+        assert is_login_redirect(page_with(sid))
+        client.__dict__.pop("_ui_sessions")
+        sid = session_of(client, created["secret"])
+        assert page_with(sid).status_code == 200
+        assert client.delete(f"/api/v1/keys/{created['id']}").status_code == 200  # revocation
+        assert is_login_redirect(page_with(sid))
+        with client.app.state.sessions() as s:
+            assert s.query(UiSession).filter(UiSession.key_id == created["id"]).count() == 0
+
+
+def test_failed_sign_ins_are_throttled(settings):
+    from dataclasses import replace
+
+    from fastapi.testclient import TestClient
+
+    from app.main import create_app
+
+    with TestClient(create_app(replace(settings, auth_failures_per_minute=3))) as client:
+        statuses = [client.post("/ui/login", data={"api_key": f"att_guess{i}"}, follow_redirects=False).status_code
+                    for i in range(4)]
+        assert statuses == [401, 401, 401, 429]
+        r = client.post("/ui/login", data={"api_key": settings.bootstrap_token}, follow_redirects=False)
+        assert r.status_code == 429 and "set-cookie" not in r.headers

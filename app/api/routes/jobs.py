@@ -67,7 +67,8 @@ def job_out(job: Job, spacecraft_name: str) -> JobOut:
 
 @router.post("", status_code=status.HTTP_202_ACCEPTED, response_model=JobAccepted)
 def submit(body: JobCreate, request: Request, session: SessionDep, who: Operator) -> JobAccepted:
-    job = service.submit(session, body, who, on_submit=request.app.state.executor.wake)
+    job = service.submit(session, body, who, on_submit=request.app.state.executor.wake,
+                         max_queued=request.app.state.settings.max_queued_jobs_per_key)
     return JobAccepted(id=job.id, status=job.status, status_url=f"/api/v1/jobs/{job.id}")
 
 

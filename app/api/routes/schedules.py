@@ -9,7 +9,7 @@ from typing import Annotated, Any, Literal
 from fastapi import APIRouter, Query, Response, status
 from pydantic import BaseModel, Field
 
-from app.api.deps import Operator, SessionDep, Viewer
+from app.api.deps import Operator, SessionDep, SettingsDep, Viewer
 from app.services import schedules as service
 from app.services.schedules import ScheduleSpec
 from storage.models import Schedule
@@ -68,10 +68,11 @@ def _out(s: Schedule, spacecraft: str) -> ScheduleOut:
 
 
 @router.post("", status_code=status.HTTP_201_CREATED, response_model=ScheduleOut)
-def create(body: ScheduleCreate, session: SessionDep, who: Operator) -> ScheduleOut:
+def create(body: ScheduleCreate, session: SessionDep, settings: SettingsDep, who: Operator) -> ScheduleOut:
     s, sc = service.create(session, ScheduleSpec(
         name=body.name, cron=body.cron, job_type=body.type, spacecraft=body.spacecraft, params=body.params,
-        reference=body.reference, window=body.window, window_s=body.window_s, enabled=body.enabled), who)
+        reference=body.reference, window=body.window, window_s=body.window_s, enabled=body.enabled), who,
+        min_period_s=settings.min_schedule_period_s)
     return _out(s, sc.name)
 
 

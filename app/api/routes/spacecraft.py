@@ -9,7 +9,8 @@ from fastapi import APIRouter, status
 from pydantic import BaseModel, Field
 
 from app.api.deps import Admin, SessionDep, Viewer
-from app.config_schema import NAME, SpacecraftConfig
+from app.config_schema import SpacecraftConfig
+from app.names import NAME
 from app.services import spacecraft as service
 from app.services.spacecraft import Configured
 

@@ -11,7 +11,7 @@ from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import JSONResponse
 from pydantic import BaseModel
 
-from app.api.deps import Operator, SessionDep, StoreDep, Viewer
+from app.api.deps import Operator, SessionDep, SettingsDep, StoreDep, Viewer
 from app.api.files import download_response, read_limited, upload_filename
 from app.api.pagination import MAX_LIMIT, announce_next
 from app.ingest.errors import UploadError
@@ -83,7 +83,8 @@ async def upload_telemetry(
     opts = service.upload_options(config, time_scale, sensor, norm_tolerance, quaternion_direction)
     try:
         rec, notes = await run_in_threadpool(service.ingest_upload, session, store, sc, spec, body, content_type,
-                                             opts, meta, config, format, settings.max_upload_rows)
+                                             opts, meta, config, format, settings.max_upload_rows,
+                                             settings.max_upload_days)
     except UploadError as exc:
         return JSONResponse(status_code=422, content={
             "detail": f"upload rejected, nothing stored: {exc}", "error_count": exc.total,
@@ -100,7 +101,7 @@ async def upload_telemetry(
 
 @router.get("/telemetry/{stream}", responses={200: {"content": {t: {} for t in FORMATS.values()}}})
 def read_telemetry(
-    name: str, stream: str, session: SessionDep, store: StoreDep, who: Viewer,
+    name: str, stream: str, session: SessionDep, store: StoreDep, settings: SettingsDep, who: Viewer,
     start: Annotated[str | None, Query(description="ISO 8601 or seconds since 1970 on time_scale")] = None,
     end: Annotated[str | None, Query(description="inclusive end of the window")] = None,
     format: Annotated[str, Query(pattern="^(csv|parquet|json)$")] = "csv",
@@ -113,7 +114,8 @@ def read_telemetry(
     ``time`` is ISO 8601 on ``time_scale`` (UTC with a ``Z``; 23:59:60 inside leap seconds) or, with
     ``time_format=seconds``, seconds since 1970-01-01 on that scale.
     """
-    table = service.read(session, store, name, stream, who, start, end, time_scale, sensor)
+    table = service.read(session, store, name, stream, who, start, end, time_scale, sensor,
+                         max_rows=settings.max_read_rows)
     return download_response(table_download(table, format, time_scale, time_format, f"{name}_{stream}"))
 
 

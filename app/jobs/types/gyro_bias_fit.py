@@ -52,6 +52,9 @@ MAX_SMOOTHING_HARMONICS = 400
 """Upper end of the harmonic-count search when use_smoothed_rates and smoothing_harmonics is None."""
 
 
+MAX_SLIDING_WINDOWS = 2000  # sub-interval fits of sliding windows per job
+
+
 class Params(BaseModel):
     """Parameters of ``gyro_bias_fit`` (003 §2.1-2.4)."""
 
@@ -78,8 +81,8 @@ class Params(BaseModel):
         60.0, description="The mounting is reported only when every component's sigma is below this."
     )
     subintervals: list[Annotated[int, Field(ge=1, le=64)]] = Field(
-        [2, 4], description="Each n cuts the segment into n equal parts fitted separately (003 §2.4: 2, 4)."
-    )
+        [2, 4], max_length=8,
+        description="Each n cuts the segment into n equal parts fitted separately (003 §2.4: 2, 4).")
     sliding_window_s: PositiveFloat | None = Field(None, description="Also fit sliding windows of this length.")
     sliding_step_s: PositiveFloat | None = Field(None, description="Step of the sliding windows (default: half).")
     gyro_arw_rad_sqrt_s: float | tuple[float, float, float] | None = Field(
@@ -320,6 +323,14 @@ def _fit(win: _Window, params: Params, w_fit: NDArray[np.float64], arw: NDArray[
                                       list[tuple[str, int, int]]]:
     """The whole segment (003 §2.2), then its sub-intervals and sliding windows (003 §2.4)."""
     t_g, t_st = win.t_g, win.t_st
+    if params.sliding_window_s is not None:  # bounded work: a tiny step over a long window is millions of fits
+        span_s = float(t_st.max() - t_st.min())
+        step_s = params.sliding_step_s or params.sliding_window_s / 2.0
+        n_windows = max(0.0, (span_s - params.sliding_window_s) / step_s + 1.0)
+        if n_windows > MAX_SLIDING_WINDOWS:
+            raise TaskError(f"sliding windows of {params.sliding_window_s:g} s every {step_s:g} s make "
+                            f"{n_windows:.0f} fits over {span_s:.0f} s; at most {MAX_SLIDING_WINDOWS}: "
+                            "give a longer sliding_step_s")
     progress(0.1, "fitting the whole segment")
     try:
         fit = fit_gyro_bias(

@@ -33,7 +33,7 @@ from typing import Any, Literal
 import numpy as np
 from matplotlib.figure import Figure
 from numpy.typing import NDArray
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from app.jobs.registry import JobType
 from processing.attitude import rotations
@@ -78,6 +78,28 @@ class Params(BaseModel):
             "alignment_calibration runs only when the body rate (60-s means) varies by at least this much (std "
             "about its mean, on some axis): a constant rate cannot be told from gyro drift, so the arc cannot "
             "determine a misalignment and no calibration would be stored (0: always run)"))
+
+    @field_validator("stage_params")
+    @classmethod
+    def _stages_known_and_valid(cls, value: dict[str, dict[str, Any]]) -> dict[str, dict[str, Any]]:
+        """Each stage's parameters checked against its job type's Params at submission (not only when the
+        pipeline reaches the stage), and stored as that model's validated values."""
+        unknown = sorted(set(value) - set(STAGE_NAMES))
+        if unknown:
+            raise ValueError(f"unknown stages {unknown}; stages: {', '.join(STAGE_NAMES)}")
+        available = _available()
+        out = {}
+        for name, given in value.items():
+            jt = available.get(name)
+            if jt is None:  # not installed here: the pipeline notes it and leaves the stage out
+                out[name] = given
+                continue
+            try:
+                out[name] = jt.params.model_validate(given).model_dump(mode="json")
+            except ValidationError as exc:
+                problems = "; ".join(f"{'.'.join(map(str, e['loc'])) or name}: {e['msg']}" for e in exc.errors())
+                raise ValueError(f"{name}: {problems}") from None
+        return out
 
 
 def _available() -> dict[str, JobType]:
