@@ -19,6 +19,7 @@ from __future__ import annotations
 import datetime as dt
 import logging
 import os
+import re
 import socket
 import threading
 import uuid
@@ -54,12 +55,40 @@ class SkipTick(Exception):
     """The tick cannot submit a job; the message is stored with the run."""
 
 
+CRON_FIELDS = (("minute", 0, 59), ("hour", 0, 23), ("day of month", 1, 31), ("month", 1, 12),
+               ("day of week", 0, 7), ("second", 0, 59))
+
+
+def cron_field_problem(expr: str) -> str | None:
+    """Which field of a 5- or 6-field cron expression croniter refuses, and why (e.g. "hour 25 out of range
+    0-23"); None when the field count is wrong or no single field is to blame."""
+    fields = expr.split()
+    if len(fields) not in (5, 6):
+        return None
+    for i, (value, (name, low, high)) in enumerate(zip(fields, CRON_FIELDS, strict=False)):
+        probe = ["*"] * len(fields)
+        probe[i] = value
+        if croniter.is_valid(" ".join(probe)):
+            continue
+        numbers = [int(n) for n in re.findall(r"\d+", value.split("/")[0])]
+        outside = [n for n in numbers if not low <= n <= high]
+        if outside:
+            return f"{name} {outside[0]} out of range {low}-{high} (field {i + 1}, {value!r})"
+        return (f"{name} field {value!r} (field {i + 1}) is not valid: numbers {low}-{high}, *, ranges a-b, "
+                f"lists a,b, steps */n")
+    return None
+
+
 def check_cron(expr: str) -> str:
     """Normalise and validate a cron expression (UTC); raises CronError."""
     expr = " ".join(expr.split())
     if not expr or not croniter.is_valid(expr):
+        problem = cron_field_problem(expr)
+        if problem:
+            raise CronError(f"invalid cron expression {expr!r}: {problem}")
         raise CronError(f"invalid cron expression {expr!r}: expected 5 fields (minute hour day month weekday), "
-                        f"6 with seconds last, or @hourly/@daily/@weekly/@monthly/@yearly")
+                        f"6 with seconds last, or @hourly/@daily/@weekly/@monthly/@yearly; got "
+                        f"{len(expr.split())} field(s)")
     try:
         next_tick(expr, utcnow())
     except (CroniterError, ValueError, OverflowError):
