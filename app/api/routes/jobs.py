@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import datetime as dt
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, Query, Request, Response, status
 from fastapi.responses import FileResponse, HTMLResponse, JSONResponse
@@ -19,10 +19,12 @@ from storage.models import Job
 
 router = APIRouter(prefix="/api/v1/jobs", tags=["jobs"])
 
+JobStatus = Literal["queued", "running", "succeeded", "failed", "cancelled"]
+
 
 class JobAccepted(BaseModel):
     id: str
-    status: str
+    status: JobStatus
     status_url: str
 
 
@@ -30,7 +32,7 @@ class JobOut(BaseModel):
     id: str
     type: str
     spacecraft: str
-    status: str
+    status: JobStatus
     progress: float
     stage: str
     start: str
@@ -105,7 +107,7 @@ def cancel(job_id: str, session: SessionDep, who: Operator) -> JobOut:
 
 class ArtifactOut(BaseModel):
     name: str
-    kind: str
+    kind: Literal["summary", "table", "figure", "file"]
     media_type: str
     size_bytes: int
     checksum_sha256: str
