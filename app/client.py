@@ -245,7 +245,8 @@ class ApiClient:
     def delete(self, path: str, **kw: Any) -> Any:
         return self.request("DELETE", path, expect=(200, 204), **kw)[1]
 
-    def upload_file(self, spacecraft: str, stream: str, path: str | Path, *, content_type: str | None = None,
+    def upload_file(self, spacecraft: str, stream: str, path: str | os.PathLike[str], *,
+                    content_type: str | None = None,
                     on_progress: Callable[[int, int], None] | None = None, **params: Any) -> Any:
         """Stream a telemetry file (CSV, Parquet, Arrow IPC stream, JSON) in 1 MiB chunks.
 
@@ -421,8 +422,8 @@ class Client(ApiClient):
         strings; seconds since 1970 on ``time_scale``) and/or ``time_tai_ns`` (exact, integer TAI ns).
         All or nothing: a :class:`ValidationFailed` lists every bad row and column.
         """
-        params = {"time_scale": time_scale, "sensor": sensor, "quaternion_direction": quaternion_direction,
-                  "format": format}
+        params: dict[str, Any] = {"time_scale": time_scale, "sensor": sensor,
+                                  "quaternion_direction": quaternion_direction, "format": format}
         if isinstance(data, (str, os.PathLike)):
             out: dict[str, Any] = self.upload_file(spacecraft, stream, data, filename=filename, **params)
             return out

@@ -110,12 +110,11 @@ def _job_unions(schema: dict[str, Any]) -> None:
     for name, jt in sorted(registry().items()):
         camel = _camel(name)
         params = create_model(f"{camel}Params", __base__=jt.params, __doc__=f"parameters of {name}: {jt.title}")
-        requests.append(create_model(f"{camel}Request", __base__=JobCreate, type=(Literal[name], ...),
-                                     params=(params, Field(default_factory=dict))))  # type: ignore[call-overload]
-        summary = summary_model(jt)
-        answers.append(create_model(f"{camel}Job", __base__=JobOut, type=(Literal[name], ...),
-                                    result=(summary | None, Field(description=f"the summary of {name} "
-                                                                              "(null until it succeeded)"))))
+        request: dict[str, Any] = {"type": (Literal[name], ...), "params": (params, Field(default_factory=dict))}
+        requests.append(create_model(f"{camel}Request", __base__=JobCreate, **request))
+        answer: dict[str, Any] = {"type": (Literal[name], ...), "result": (
+            summary_model(jt) | None, Field(description=f"the summary of {name} (null until it succeeded)"))}
+        answers.append(create_model(f"{camel}Job", __base__=JobOut, **answer))
     _add_union(schema, "JobRequest", requests, "a job request: `params` are those of its `type`", "validation")
     _add_union(schema, "TypedJobOut", answers, "a job: `result` is the summary of its `type`", "serialization")
     ops = schema["paths"]

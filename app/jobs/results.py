@@ -27,7 +27,7 @@ WarningCode.__doc__ = "the stable warning codes (README, Warnings)"
 class WarningOut(BaseModel):
     """A result's statement about itself (processing.tasks.ResultWarning)."""
 
-    code: WarningCode  # type: ignore[valid-type]
+    code: WarningCode
     message: str
     evidence: dict[str, Any] = Field(default_factory=dict)
 
