@@ -25,7 +25,6 @@ REF = "#/components/schemas/{model}"
 ENUM_PATTERN = re.compile(r"^\^\(((?:[A-Za-z0-9_\-]|\\\.)+(?:\|(?:[A-Za-z0-9_\-]|\\\.)+)*)\)\$$")
 
 ERROR_TEXT = {
-    400: "a request the service refuses for another reason (the detail says why)",
     401: "missing, invalid, expired or revoked API key",
     403: "the key's role is too low",
     404: "not found (or not visible to this key)",
@@ -134,21 +133,31 @@ def _spacecraft_config(schema: dict[str, Any]) -> None:
     out["config"] = {"$ref": REF.format(model=config), "description": "the configuration of this version"}
 
 
+# operations whose service calls can refuse with 409 (app/services: already exists, retracted, finished, ...)
+CONFLICTS = {("post", "/api/v1/spacecraft"), ("put", "/api/v1/spacecraft/{name}/config"),
+             ("post", "/api/v1/spacecraft/{name}/telemetry/{stream}"),
+             ("delete", "/api/v1/spacecraft/{name}/ingests/{ingest_id}"),
+             ("post", "/api/v1/spacecraft/{name}/quarantine/{file_id}/restore"),
+             ("post", "/api/v1/jobs/{job_id}/cancel"), ("post", "/api/v1/schedules")}
+RAW_UPLOADS = {("post", "/api/v1/spacecraft/{name}/telemetry/{stream}"), ("post", "/api/v1/reference/{kind}")}
+
+
 def _statuses(path: str, method: str, op: dict[str, Any]) -> set[int]:
     """The error statuses the operation can answer (its dependencies and its service calls)."""
     if not path.startswith("/api/v1"):
         return set()
     codes = {401, 403, 422, 429, 500}  # key, role, request validation (also unknown query parameters), rate, bugs
     has_body = "requestBody" in op
-    writes = method in ("post", "put", "delete")
     if "{" in path or any(p.get("name") in ("spacecraft", "kind") for p in op.get("parameters", [])) or has_body:
         codes.add(404)  # a named spacecraft, job, key, data set, schedule or artifact may not exist (or be hidden)
-    if writes:
-        codes |= {400, 409}
+    if (method, path) in CONFLICTS:
+        codes.add(409)
     if has_body:
         codes.add(413)
+    if (method, path) in RAW_UPLOADS:
+        codes |= {413, 415}  # also gzip bodies inflating beyond the limit, unknown Content-Encoding
     if path.endswith("/telemetry/{stream}") and method == "post":
-        codes |= {415, 503, 507}
+        codes |= {503, 507}
     if path.endswith("/telemetry/{stream}") and method == "get" or "/export/" in path:
         codes.add(503)
     if path.startswith("/api/v1/spacecraft/{name}/ingests") or path.endswith("/restore"):

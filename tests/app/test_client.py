@@ -5,6 +5,8 @@ tables, report and artifacts; typed errors with the API's row/column detail; sho
 from __future__ import annotations
 
 import json
+import sys
+import types
 
 import numpy as np
 import pandas as pd
@@ -156,3 +158,32 @@ def test_short_ids_and_cancel(client):
         client.job("ffffffff" if not any(i.startswith("ffffffff") for i in all_ids) else "00000000")
     with pytest.raises(ValueError, match="at least 4"):
         client.job("ab")
+
+
+def test_wait_draws_a_tqdm_bar_when_tqdm_is_installed(client, monkeypatch):
+    """tqdm is optional: when importable, wait() feeds it the job's progress (0..100 %) and stage."""
+    seen: list[tuple[float, str]] = []
+
+    class FakeBar:
+        def __init__(self, total, desc, **_):
+            assert total == 100 and desc.startswith("job ")
+            self.n, self.postfix, self.closed = 0.0, "", False
+
+        def set_postfix_str(self, text, refresh=True):
+            self.postfix = text
+
+        def refresh(self):
+            seen.append((self.n, self.postfix))
+
+        def close(self):
+            seen.append((-1.0, "closed"))
+
+    monkeypatch.setitem(sys.modules, "tqdm.auto", types.SimpleNamespace(tqdm=FakeBar))
+    client.create_spacecraft("nb5", {})
+    client.upload("nb5", "gyro", gyro_frame(10, slice(0, 0)))
+    job = client.run("executor_check", "nb5", params={"duration_s": 1.0}, timeout_s=60)
+    assert job["status"] == "succeeded"
+    assert seen[-1] == (-1.0, "closed") and seen[-2] == (100.0, "succeeded: done")
+    assert [n for n, _ in seen[:-1]] == sorted(n for n, _ in seen[:-1])  # progress never goes back
+    assert client.run("executor_check", "nb5", params={"duration_s": 0.1}, progress=False)["status"] == "succeeded"
+    assert seen[-1] == (-1.0, "closed") and len([s for s in seen if s[1] == "closed"]) == 1  # no bar when off
