@@ -25,6 +25,7 @@ REF = "#/components/schemas/{model}"
 ENUM_PATTERN = re.compile(r"^\^\(((?:[A-Za-z0-9_\-]|\\\.)+(?:\|(?:[A-Za-z0-9_\-]|\\\.)+)*)\)\$$")
 
 ERROR_TEXT = {
+    400: "the body cannot be parsed (e.g. not JSON)",
     401: "missing, invalid, expired or revoked API key",
     403: "the key's role is too low",
     404: "not found (or not visible to this key)",
@@ -153,7 +154,7 @@ def _statuses(path: str, method: str, op: dict[str, Any]) -> set[int]:
     if (method, path) in CONFLICTS:
         codes.add(409)
     if has_body:
-        codes.add(413)
+        codes |= {400, 413}  # 400: a body that is not parsable (e.g. broken JSON)
     if (method, path) in RAW_UPLOADS:
         codes |= {413, 415}  # also gzip bodies inflating beyond the limit, unknown Content-Encoding
     if path.endswith("/telemetry/{stream}") and method == "post":
