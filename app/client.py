@@ -545,9 +545,17 @@ class Client(ApiClient):
         return raw if isinstance(raw, bytes) else json.dumps(raw).encode()
 
     def table(self, job_id: str, name: str) -> pd.DataFrame:
-        """One result table (its Parquet artifact) as a DataFrame."""
+        """One result table (its Parquet artifact) as a DataFrame; beside ``time_tai_ns`` its ``time`` (ISO text
+        in the file) becomes ``datetime64[ns, UTC]`` (POSIX: a leap second holds at the next midnight)."""
         stem = name.removesuffix(".parquet")
-        return pq.read_table(io.BytesIO(self.artifact_bytes(job_id, f"{stem}.parquet"))).to_pandas()
+        table = pq.read_table(io.BytesIO(self.artifact_bytes(job_id, f"{stem}.parquet")))
+        if "time_tai_ns" in table.column_names and "time" in table.column_names \
+                and not pa.types.is_timestamp(table.schema.field("time").type):
+            from processing.time.timescales import tai_ns_to_epoch_ns
+
+            utc = pa.array(tai_ns_to_epoch_ns(table.column("time_tai_ns").to_numpy(), "utc"), pa.timestamp("ns", "UTC"))
+            table = table.set_column(table.column_names.index("time"), "time", utc)
+        return table.to_pandas()
 
     def tables(self, job_id: str) -> dict[str, pd.DataFrame]:
         """Every result table of the job, by name, as DataFrames."""

@@ -82,6 +82,7 @@ def test_notebook_round_trip(client, tmp_path):
     tables = client.tables(short)
     gaps = tables["gaps"]
     assert len(gaps) == 1 and gaps["missing"].iloc[0] == 60
+    assert str(gaps["time"].dtype) == "datetime64[ns, UTC]" and gaps["time"].iloc[0] == frame["time"].iloc[199]
     assert gaps["time_tai_ns"].iloc[0] == expected_tai[199] and gaps["after_tai_ns"].iloc[0] == expected_tai[200]
     report = client.report(short, tmp_path / "report.html")
     assert report.read_text().lstrip().lower().startswith("<!doctype html")
