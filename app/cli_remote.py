@@ -466,7 +466,8 @@ def add_remote_commands(sub: Any) -> None:
     p.add_argument("--format", default="csv", choices=["csv", "parquet", "arrow", "json"],
                    help="parquet/arrow: a timestamp time and time_tai_ns (default %(default)s)")
     p.add_argument("--time-scale", default="utc", choices=["utc", "tai", "gps", "tt"])
-    p.add_argument("--time-format", default="iso", choices=["iso", "seconds"], help="csv/json times")
+    p.add_argument("--time-format", default="iso", choices=["iso", "seconds", "tai_ns"],
+                   help="csv/json times (tai_ns: ISO time and the exact time_tai_ns)")
     p.add_argument("-o", "--output", metavar="FILE", help="file to write (default: stdout)")
     p.set_defaults(func=_telemetry_get)
 

@@ -310,14 +310,18 @@ def _exact_times(table: pa.Table, mapping: dict[str, str], scale: str, errors: _
     (on UTC: the same POSIX count, which holds during a leap second)."""
     col = table.column(mapping[TIME_COLUMN])
     n = len(col)
-    if not pa.types.is_integer(col.type):
-        errors.add(None, TIME_COLUMN, f"expected integer nanoseconds of TAI, got a {col.type} column")
-        return np.zeros(n, dtype=np.int64)
     nulls = col.is_null().to_numpy(zero_copy_only=False)
     if nulls.any():
         errors.add_rows(np.flatnonzero(nulls), TIME_COLUMN, "missing time")
         return np.zeros(n, dtype=np.int64)
-    tai = pc.cast(col, pa.int64()).to_numpy(zero_copy_only=False)
+    try:  # integers, or integers as text (CSV)
+        if not (pa.types.is_integer(col.type) or pa.types.is_string(col.type) or pa.types.is_large_string(col.type)):
+            raise pa.ArrowInvalid(str(col.type))
+        tai = pc.cast(pc.utf8_trim_whitespace(col) if not pa.types.is_integer(col.type) else col,
+                      pa.int64()).to_numpy(zero_copy_only=False)
+    except pa.ArrowInvalid:
+        errors.add(None, TIME_COLUMN, f"expected integer nanoseconds of TAI, got {col.type} values that are not")
+        return np.zeros(n, dtype=np.int64)
     if "time" in mapping:
         given = _times(table.column(mapping["time"]), scale, errors)
         if errors.total == 0:

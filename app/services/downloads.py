@@ -30,10 +30,15 @@ class Download:
 
 
 def with_times(table: pa.Table, time_scale: str, time_format: str) -> pa.Table:
-    """``time_tai_ns`` replaced by ``time``: ISO 8601 on ``time_scale`` (iso) or seconds since 1970 (seconds)."""
+    """``time_tai_ns`` replaced by ``time``: ISO 8601 on ``time_scale`` (iso) or seconds since 1970 (seconds);
+    tai_ns: the ISO ``time`` followed by the exact ``time_tai_ns``."""
     if TIME_COLUMN not in table.column_names:
         return table
     tai = table.column(TIME_COLUMN).to_numpy()
+    if time_format == "tai_ns":
+        iso = pa.array(timescales.tai_ns_to_iso(tai, time_scale), pa.string())
+        rest = table.drop_columns([TIME_COLUMN])
+        return rest.add_column(0, TIME_COLUMN, table.column(TIME_COLUMN)).add_column(0, "time", iso)
     if time_format == "iso":
         times = pa.array(timescales.tai_ns_to_iso(tai, time_scale), pa.string())
     else:

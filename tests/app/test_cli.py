@@ -172,6 +172,15 @@ def test_telemetry_get_formats_and_window(server, capsys, tmp_path):
     code, out, _ = cli(capsys, server, "telemetry", "get", "gyro", "--spacecraft", "tel1", "--format", "json",
                        "--time-scale", "tai", "--time-format", "seconds", "--end", "1685577637")
     assert code == 0 and [r["time"] for r in json.loads(out)] == [1685577637.0]
+    exact = tmp_path / "g_tai.csv"
+    code, _, _ = cli(capsys, server, "telemetry", "get", "gyro", "--spacecraft", "tel1", "--time-format", "tai_ns",
+                     "-o", str(exact))
+    header, first = exact.read_text().splitlines()[:2]
+    assert code == 0 and header == '"time","time_tai_ns","sensor","wx","wy","wz"'
+    assert first.startswith('"2023-06-01T00:00:00Z",' + str(table["time_tai_ns"][0].as_py()))
+    code, out, _ = cli(capsys, server, "upload", str(exact), "--spacecraft", "tel1", "--stream", "gyro", "--json",
+                       "--quiet")
+    assert code == 0 and json.loads(out)["duplicates"] == 20
     code, _, err = cli(capsys, server, "telemetry", "get", "gyroo", "--spacecraft", "tel1")
     assert code == 2 and "unknown stream 'gyroo'" in err
 

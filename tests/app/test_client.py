@@ -124,6 +124,19 @@ def test_typed_errors_carry_rows_and_columns(client):
     assert {(None, "wzz"), (None, "wz")} <= found, err.errors
     text = err.describe()
     assert "column wzz" in text and "did you mean 'wz'" in text
+    # time_tai_ns beside time must name the same instants (here: one row 1 s off, or read on the wrong scale)
+    t = pd.date_range("2023-06-01T00:00:00Z", periods=5, freq="1s", unit="ns")
+    tai = t.astype("int64").to_numpy() + 37_000_000_000
+    tai[2] += 1_000_000_000
+    both = pd.DataFrame({"time": t, "time_tai_ns": tai, "wx": 0.0, "wy": 0.0, "wz": 0.0})
+    with pytest.raises(ValidationFailed) as info:
+        client.upload("nb3", "gyro", both)
+    assert [(e.row, e.column) for e in info.value.errors] == [(2, "time")]
+    with pytest.raises(ValidationFailed) as info:
+        client.upload("nb3", "gyro", both.assign(time_tai_ns=tai - tai[2] + tai[1]).iloc[:2], time_scale="tai")
+    assert "time_scale" in info.value.errors[0].message or info.value.errors[0].column == "time"
+    with pytest.raises(ValidationFailed, match="integer nanoseconds"):
+        client.upload("nb3", "gyro", pa.table({"time_tai_ns": ["x1"], "wx": [0.0], "wy": [0.0], "wz": [0.0]}))
     with pytest.raises(NotFound):
         client.config("no-such-sat")
     with pytest.raises(ValidationFailed) as info:

@@ -107,7 +107,9 @@ def read_telemetry(
         description="parquet/arrow: `time` a timestamp (ns; UTC, or naive readings of tai/gps/tt) beside the "
                     "exact `time_tai_ns`; csv/json: `time` as text or seconds (time_format)")] = "csv",
     time_scale: Annotated[str, Query(pattern="^(utc|tai|gps|tt)$")] = "utc",
-    time_format: Annotated[str, Query(pattern="^(iso|seconds)$")] = "iso",
+    time_format: Annotated[Literal["iso", "seconds", "tai_ns"], Query(
+        description="csv/json: `time` as ISO 8601 or seconds since 1970 on time_scale; tai_ns: ISO `time` "
+                    "followed by the exact `time_tai_ns`")] = "iso",
     sensor: str | None = None,
 ) -> Response:
     """Stored samples in [start, end], sorted by sensor and time, without duplicates.
