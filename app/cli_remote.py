@@ -251,8 +251,9 @@ def _schedules_list(args: argparse.Namespace) -> int:
 
 def _schedules_show(args: argparse.Namespace) -> int:
     client = _client(args)
-    s = client.get(f"/api/v1/schedules/{args.name}")
-    runs = client.get(f"/api/v1/schedules/{args.name}/runs", params={"limit": args.limit})
+    name = client.resolve_schedule(args.name)
+    s = client.get(f"/api/v1/schedules/{name}")
+    runs = client.get(f"/api/v1/schedules/{name}/runs", params={"limit": args.limit})
     lines = [f"schedule {s['name']} ({s['id']}): {s['cron']} UTC, {s['type']} on {s['spacecraft']}, "
              f"window {s['window']}" + (f" {s['window_s']} s" if s["window_s"] else "")
              + f", next {s['next_fire_at']}", f"{'fire time':26}  {'status':9}  {'missed':>6}  job / reason"]
@@ -263,7 +264,8 @@ def _schedules_show(args: argparse.Namespace) -> int:
 
 
 def _schedules_delete(args: argparse.Namespace) -> int:
-    _client(args).delete(f"/api/v1/schedules/{args.name}")
+    client = _client(args)
+    client.delete(f"/api/v1/schedules/{client.resolve_schedule(args.name)}")
     _print(args, {"deleted": args.name}, f"schedule {args.name} deleted")
     return 0
 
@@ -497,11 +499,11 @@ def add_remote_commands(sub: Any) -> None:
     p = sched.add_parser("list", parents=[parent], help="list schedules")
     p.set_defaults(func=_schedules_list)
     p = sched.add_parser("show", parents=[parent], help="a schedule and its recent runs")
-    p.add_argument("name")
+    p.add_argument("name", help="name, id or a unique id prefix")
     p.add_argument("--limit", type=int, default=20)
     p.set_defaults(func=_schedules_show)
     p = sched.add_parser("delete", parents=[parent], help="delete a schedule (its jobs stay)")
-    p.add_argument("name")
+    p.add_argument("name", help="name, id or a unique id prefix")
     p.set_defaults(func=_schedules_delete)
 
 

@@ -384,6 +384,15 @@ class Client(ApiClient):
         return self._resolve("reference data set", dataset_id, lambda: (
             d["id"] for d in self.pages("/api/v1/reference", kind=kind)))
 
+    def resolve_schedule(self, name_or_id: str) -> str:
+        """A schedule's name or id as the service takes it: a name or full id as given, else a unique id prefix."""
+        items = self.list_schedules()
+        if any(name_or_id in (s["name"], s["id"]) for s in items):
+            return name_or_id
+        if not re.fullmatch(r"[0-9a-fA-F]{4,31}", name_or_id):
+            return name_or_id  # the service answers 404 (the CLI adds the nearest name)
+        return self._resolve("schedule", name_or_id, lambda: (s["id"] for s in items))
+
     # -- spacecraft ----------------------------------------------------------------------------------
     def spacecraft(self) -> list[dict[str, Any]]:
         """Every spacecraft the key may see, with its latest configuration."""

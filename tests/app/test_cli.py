@@ -87,6 +87,11 @@ def test_schedules_commands(server, capsys):
     assert code == 0 and "nightly" in out and "previous 86400 s" in out
     code, out, _ = cli(capsys, server, "schedules", "show", "nightly", "--json")
     assert code == 0 and json.loads(out)["runs"] == []
+    schedule_id = json.loads(out)["schedule"]["id"]
+    code, out, _ = cli(capsys, server, "schedules", "show", schedule_id[:8])
+    assert code == 0 and f"schedule nightly ({schedule_id})" in out
+    code, _, err = cli(capsys, server, "schedules", "show", "nightlyy")
+    assert code == 2 and "did you mean 'nightly'?" in err
     code, _, err = cli(capsys, server, "schedules", "create", "bad", "--cron", "every day", "--type",
                        "telemetry_coverage", "--spacecraft", "sat1")
     assert code == 2 and "invalid cron" in err
