@@ -1,5 +1,5 @@
 """Command line: ``attitude serve``, ``attitude migrate``, ``attitude create-key`` on this machine;
-``attitude upload``, ``attitude jobs submit|watch|list`` and ``attitude schedules ...`` against a running
+``attitude spacecraft|upload|telemetry|jobs|schedules|reference ...`` against a running
 service (``--url``/``ATTITUDE_URL``, ``--token``/``ATTITUDE_TOKEN``; see app/cli_remote.py)."""
 
 from __future__ import annotations

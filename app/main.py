@@ -18,6 +18,7 @@ from app.api.errors import COMMON_ERRORS, handle_service_errors
 from app.api.gate import ApiGateMiddleware, FailureThrottle
 from app.api.middleware import BodyLimitMiddleware, RateLimiter, SecurityHeadersMiddleware
 from app.api.routes import exports, ingests, jobs, keys, reference, schedules, spacecraft, telemetry
+from app.api.schemas import install as typed_openapi
 from app.jobs.dask_executor import make_executor
 from app.jobs.scheduler import Scheduler
 from app.settings import Settings
@@ -124,4 +125,5 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.include_router(exports.router, responses=COMMON_ERRORS, dependencies=[RejectUnknownQuery])
     app.include_router(schedules.router, responses=COMMON_ERRORS, dependencies=[RejectUnknownQuery])
     app.include_router(web_router)  # the web UI under /ui (cookie sessions; app/web)
+    typed_openapi(app)  # params/result unions on the job type, enums, examples, per-route errors
     return app

@@ -208,7 +208,10 @@ def _resolve_columns(table: pa.Table, spec: StreamSpec, errors: _Errors) -> dict
     for c in expected:
         if c not in mapping and c in names:
             mapping[c] = c
-    allowed = set(expected) | {SENSOR_COLUMN}
+    if TIME_COLUMN in names:  # exact TAI nanoseconds (as downloaded in Parquet/Arrow): the time, `time` optional
+        mapping[TIME_COLUMN] = TIME_COLUMN
+        expected = [c for c in expected if c != "time" or c in names]
+    allowed = set(expected) | {SENSOR_COLUMN, TIME_COLUMN, "time"}
     if spec.quaternion:
         allowed |= set(QUATERNION_ALIASES)
     for c in names:
@@ -301,6 +304,34 @@ def _check_order(times: np.ndarray, groups: np.ndarray | None, errors: _Errors) 
     errors.add_rows(order[1:][back], "time", "time goes backwards (times must increase per sensor)")
 
 
+def _exact_times(table: pa.Table, mapping: dict[str, str], scale: str, errors: _Errors) -> np.ndarray:
+    """``time_tai_ns`` (integers, exact); a ``time`` column beside it must name the same instants on ``scale``
+    (on UTC: the same POSIX count, which holds during a leap second)."""
+    col = table.column(mapping[TIME_COLUMN])
+    n = len(col)
+    nulls = col.is_null().to_numpy(zero_copy_only=False)
+    if nulls.any():
+        errors.add_rows(np.flatnonzero(nulls), TIME_COLUMN, "missing time")
+        return np.zeros(n, dtype=np.int64)
+    try:  # integers, or integers as text (CSV)
+        if not (pa.types.is_integer(col.type) or pa.types.is_string(col.type) or pa.types.is_large_string(col.type)):
+            raise pa.ArrowInvalid(str(col.type))
+        tai = pc.cast(pc.utf8_trim_whitespace(col) if not pa.types.is_integer(col.type) else col,
+                      pa.int64()).to_numpy(zero_copy_only=False)
+    except pa.ArrowInvalid:
+        errors.add(None, TIME_COLUMN, f"expected integer nanoseconds of TAI, got {col.type} values that are not")
+        return np.zeros(n, dtype=np.int64)
+    if "time" in mapping:
+        given = _times(table.column(mapping["time"]), scale, errors)
+        if errors.total == 0:
+            same = given == tai
+            if scale == "utc" and not same.all():
+                same |= timescales.tai_ns_to_epoch_ns(given, "utc") == timescales.tai_ns_to_epoch_ns(tai, "utc")
+            errors.add_rows(np.flatnonzero(~same), "time", f"differs from time_tai_ns read on {scale} (give "
+                                                           "the right time_scale, or only one of the two)")
+    return np.asarray(tai, dtype=np.int64)
+
+
 def validate(table: pa.Table, spec: StreamSpec, policy: SensorPolicy, opts: UploadOptions) -> Validated:
     """Check an upload and return the canonical, sorted table (see module docstring)."""
     errors = _Errors()
@@ -317,7 +348,11 @@ def validate(table: pa.Table, spec: StreamSpec, policy: SensorPolicy, opts: Uplo
         errors.add(None, None, "the upload has no rows")
     errors.raise_if_any()
 
-    out: dict[str, np.ndarray] = {TIME_COLUMN: _times(table.column(mapping["time"]), opts.time_scale, errors)}
+    if TIME_COLUMN in mapping:
+        times = _exact_times(table, mapping, opts.time_scale, errors)
+    else:
+        times = _times(table.column(mapping["time"]), opts.time_scale, errors)
+    out: dict[str, np.ndarray] = {TIME_COLUMN: times}
     sensors = _sensors(table, mapping, policy, opts, errors)
     for c in spec.columns:
         col = table.column(mapping[c.name])

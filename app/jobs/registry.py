@@ -41,6 +41,9 @@ class JobType:
     # the summary keys that answer the job's question, shown first in its report (app.reports.headline);
     # None: the generic rule (the quantities the specification judges, then numbers with a unit suffix)
     headline: tuple[Answer, ...] | None = None
+    # the summary's declared schema (the OpenAPI ``<Type>Summary``; a test checks it on simulated runs);
+    # None: the one in app/jobs/results.py for this name, else the generic one (warnings typed)
+    result_model: type[BaseModel] | None = None
 
 
 _MODULES = ("coverage", "executor_check", "star_tracker_accuracy", "gyro_bias_fit", "orbital_attitude", "gyroless_ekf",

@@ -19,6 +19,7 @@ from __future__ import annotations
 import datetime as dt
 import logging
 import os
+import re
 import socket
 import threading
 import uuid
@@ -57,6 +58,29 @@ class SkipTick(Exception):
 MIN_PERIOD_S = 60.0  # default floor between ticks (ATTITUDE_MIN_SCHEDULE_PERIOD_S)
 _PERIOD_PROBE_TICKS = 130  # a six-field expression repeats its seconds pattern at least every minute
 
+CRON_FIELDS = (("minute", 0, 59), ("hour", 0, 23), ("day of month", 1, 31), ("month", 1, 12),
+               ("day of week", 0, 7), ("second", 0, 59))
+
+
+def cron_field_problem(expr: str) -> str | None:
+    """Which field of a 5- or 6-field cron expression croniter refuses, and why (e.g. "hour 25 out of range
+    0-23"); None when the field count is wrong or no single field is to blame."""
+    fields = expr.split()
+    if len(fields) not in (5, 6):
+        return None
+    for i, (value, (name, low, high)) in enumerate(zip(fields, CRON_FIELDS, strict=False)):
+        probe = ["*"] * len(fields)
+        probe[i] = value
+        if croniter.is_valid(" ".join(probe)):
+            continue
+        numbers = [int(n) for n in re.findall(r"\d+", value.split("/")[0])]
+        outside = [n for n in numbers if not low <= n <= high]
+        if outside:
+            return f"{name} {outside[0]} out of range {low}-{high} (field {i + 1}, {value!r})"
+        return (f"{name} field {value!r} (field {i + 1}) is not valid: numbers {low}-{high}, *, ranges a-b, "
+                f"lists a,b, steps */n")
+    return None
+
 
 def check_cron(expr: str, min_period_s: float = MIN_PERIOD_S) -> str:
     """Normalise and validate a cron expression (UTC); raises CronError, also when two ticks come closer
@@ -65,8 +89,12 @@ def check_cron(expr: str, min_period_s: float = MIN_PERIOD_S) -> str:
     if len(expr) > 200:
         raise CronError(f"cron expression of {len(expr)} characters; at most 200")
     if not expr or not croniter.is_valid(expr):
+        problem = cron_field_problem(expr)
+        if problem:
+            raise CronError(f"invalid cron expression {expr!r}: {problem}")
         raise CronError(f"invalid cron expression {expr!r}: expected 5 fields (minute hour day month weekday), "
-                        f"6 with seconds last, or @hourly/@daily/@weekly/@monthly/@yearly")
+                        f"6 with seconds last, or @hourly/@daily/@weekly/@monthly/@yearly; got "
+                        f"{len(expr.split())} field(s)")
     try:
         next_tick(expr, utcnow())
     except (CroniterError, ValueError, OverflowError):

@@ -15,7 +15,9 @@ from app.jobs.outputs import csv_safe, jsonable
 from processing.streams import TIME_COLUMN
 from processing.time import timescales
 
-FORMATS = {"csv": "text/csv", "parquet": "application/vnd.apache.parquet", "json": "application/json"}
+FORMATS = {"csv": "text/csv", "parquet": "application/vnd.apache.parquet", "json": "application/json",
+           "arrow": "application/vnd.apache.arrow.stream"}
+BINARY_FORMATS = ("parquet", "arrow")  # typed columns: a timestamp ``time`` and the exact ``time_tai_ns``
 
 
 @dataclass(frozen=True)
@@ -28,10 +30,15 @@ class Download:
 
 
 def with_times(table: pa.Table, time_scale: str, time_format: str) -> pa.Table:
-    """``time_tai_ns`` replaced by ``time``: ISO 8601 on ``time_scale`` (iso) or seconds since 1970 (seconds)."""
+    """``time_tai_ns`` replaced by ``time``: ISO 8601 on ``time_scale`` (iso) or seconds since 1970 (seconds);
+    tai_ns: the ISO ``time`` followed by the exact ``time_tai_ns``."""
     if TIME_COLUMN not in table.column_names:
         return table
     tai = table.column(TIME_COLUMN).to_numpy()
+    if time_format == "tai_ns":
+        iso = pa.array(timescales.tai_ns_to_iso(tai, time_scale), pa.string())
+        rest = table.drop_columns([TIME_COLUMN])
+        return rest.add_column(0, TIME_COLUMN, table.column(TIME_COLUMN)).add_column(0, "time", iso)
     if time_format == "iso":
         times = pa.array(timescales.tai_ns_to_iso(tai, time_scale), pa.string())
     else:
@@ -39,22 +46,40 @@ def with_times(table: pa.Table, time_scale: str, time_format: str) -> pa.Table:
     return table.drop_columns([TIME_COLUMN]).add_column(0, "time", times)
 
 
+def with_timestamps(table: pa.Table, time_scale: str) -> pa.Table:
+    """``time`` as a timestamp (ns; tz UTC on the UTC scale, naive readings of the other scales) in front of
+    the exact ``time_tai_ns``. Inside a leap second the UTC timestamp holds at the following midnight (POSIX
+    has no 23:59:60); ``time_tai_ns`` keeps the instant."""
+    if TIME_COLUMN not in table.column_names:
+        return table
+    tai = table.column(TIME_COLUMN).to_numpy()
+    epoch_ns = timescales.tai_ns_to_epoch_ns(tai, time_scale)
+    kind = pa.timestamp("ns", tz="UTC") if time_scale == "utc" else pa.timestamp("ns")
+    rest = table.drop_columns([TIME_COLUMN])
+    return rest.add_column(0, TIME_COLUMN, table.column(TIME_COLUMN)).add_column(0, "time", pa.array(epoch_ns, kind))
+
+
 def encode(table: pa.Table, fmt: str) -> bytes:
-    """The table as CSV, Parquet or JSON records (compact JSON, non-finite numbers as null)."""
+    """The table as CSV, Parquet, Arrow IPC stream or JSON records (compact JSON, non-finite numbers as null)."""
     if fmt == "json":
         return json.dumps(jsonable(table.to_pylist()), ensure_ascii=False, allow_nan=False, indent=None,
                           separators=(",", ":")).encode("utf-8")
     buf = io.BytesIO()
     if fmt == "csv":  # text cells that a spreadsheet would run as formulas are prefixed with '
         pacsv.write_csv(csv_safe(table), buf)
+    elif fmt == "arrow":
+        with pa.ipc.new_stream(buf, table.schema) as writer:
+            writer.write_table(table)
     else:
         pq.write_table(table, buf)
     return buf.getvalue()
 
 
 def table_download(table: pa.Table, fmt: str, time_scale: str, time_format: str, stem: str) -> Download:
-    """A table as a ``<stem>.<fmt>`` download; ``time_tai_ns`` becomes ``time`` on the requested scale."""
-    return Download(encode(with_times(table, time_scale, time_format), fmt), FORMATS[fmt], f"{stem}.{fmt}")
+    """A table as a ``<stem>.<fmt>`` download. CSV/JSON: ``time_tai_ns`` becomes ``time`` on the requested scale
+    (ISO or seconds); Parquet/Arrow: a timestamp ``time`` on that scale beside ``time_tai_ns``."""
+    timed = with_timestamps(table, time_scale) if fmt in BINARY_FORMATS else with_times(table, time_scale, time_format)
+    return Download(encode(timed, fmt), FORMATS[fmt], f"{stem}.{fmt}")
 
 
 @dataclass(frozen=True)

@@ -36,7 +36,7 @@ pytestmark = pytest.mark.slow
 def _call(base, method, path, body=None, content_type="application/json"):
     req = urllib.request.Request(base + path, data=body, method=method,
                                  headers={**AUTH, "Content-Type": content_type})
-    with urllib.request.urlopen(req, timeout=30) as r:
+    with urllib.request.urlopen(req, timeout=120) as r:  # the first job submission imports every job type
         return json.loads(r.read())
 
 

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import datetime as dt
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal, cast
 
 from fastapi import APIRouter, Query, Request, Response, status
 from fastapi.responses import FileResponse, HTMLResponse, JSONResponse
@@ -19,10 +19,13 @@ from storage.models import Job
 
 router = APIRouter(prefix="/api/v1/jobs", tags=["jobs"])
 
+JobStatus = Literal["queued", "running", "succeeded", "failed", "cancelled"]
+ArtifactKind = Literal["summary", "table", "figure", "file"]
+
 
 class JobAccepted(BaseModel):
     id: str
-    status: str
+    status: JobStatus
     status_url: str
 
 
@@ -30,7 +33,7 @@ class JobOut(BaseModel):
     id: str
     type: str
     spacecraft: str
-    status: str
+    status: JobStatus
     progress: float
     stage: str
     start: str
@@ -54,7 +57,8 @@ class JobOut(BaseModel):
 def job_out(job: Job, spacecraft_name: str) -> JobOut:
     stored = job.result or {}
     return JobOut(
-        id=job.id, type=job.type, spacecraft=spacecraft_name, status=job.status, progress=job.progress,
+        id=job.id, type=job.type, spacecraft=spacecraft_name, status=cast(JobStatus, job.status),
+        progress=job.progress,
         stage=job.stage, start=iso(job.start_tai_ns), end=iso(job.end_tai_ns), params=job.params,
         reference=job.reference or {},
         config_version=job.config_version, software_version=job.software_version,
@@ -69,7 +73,7 @@ def job_out(job: Job, spacecraft_name: str) -> JobOut:
 def submit(body: JobCreate, request: Request, session: SessionDep, who: Operator) -> JobAccepted:
     job = service.submit(session, body, who, on_submit=request.app.state.executor.wake,
                          max_queued=request.app.state.settings.max_queued_jobs_per_key)
-    return JobAccepted(id=job.id, status=job.status, status_url=f"/api/v1/jobs/{job.id}")
+    return JobAccepted(id=job.id, status=cast(JobStatus, job.status), status_url=f"/api/v1/jobs/{job.id}")
 
 
 @router.get("/types")
@@ -106,7 +110,7 @@ def cancel(job_id: str, session: SessionDep, who: Operator) -> JobOut:
 
 class ArtifactOut(BaseModel):
     name: str
-    kind: str
+    kind: ArtifactKind
     media_type: str
     size_bytes: int
     checksum_sha256: str
@@ -116,7 +120,7 @@ class ArtifactOut(BaseModel):
 
 @router.get("/{job_id}/artifacts", response_model=list[ArtifactOut])
 def list_artifacts(job_id: str, session: SessionDep, who: Viewer) -> list[ArtifactOut]:
-    return [ArtifactOut(name=a.name, kind=a.kind, media_type=a.media_type, size_bytes=a.size_bytes,
+    return [ArtifactOut(name=a.name, kind=cast(ArtifactKind, a.kind), media_type=a.media_type, size_bytes=a.size_bytes,
                         checksum_sha256=a.checksum_sha256, description=a.description,
                         url=f"/api/v1/jobs/{job_id}/artifacts/{a.name}")
             for a in service.artifacts(session, job_id, who)]

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import datetime as dt
 import hashlib
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, Query, Request, Response, status
 from fastapi.concurrency import run_in_threadpool
@@ -104,15 +104,21 @@ def read_telemetry(
     name: str, stream: str, session: SessionDep, store: StoreDep, settings: SettingsDep, who: Viewer,
     start: Annotated[str | None, Query(description="ISO 8601 or seconds since 1970 on time_scale")] = None,
     end: Annotated[str | None, Query(description="inclusive end of the window")] = None,
-    format: Annotated[str, Query(pattern="^(csv|parquet|json)$")] = "csv",
+    format: Annotated[Literal["csv", "parquet", "arrow", "json"], Query(
+        description="parquet/arrow: `time` a timestamp (ns; UTC, or naive readings of tai/gps/tt) beside the "
+                    "exact `time_tai_ns`; csv/json: `time` as text or seconds (time_format)")] = "csv",
     time_scale: Annotated[str, Query(pattern="^(utc|tai|gps|tt)$")] = "utc",
-    time_format: Annotated[str, Query(pattern="^(iso|seconds)$")] = "iso",
+    time_format: Annotated[Literal["iso", "seconds", "tai_ns"], Query(
+        description="csv/json: `time` as ISO 8601 or seconds since 1970 on time_scale; tai_ns: ISO `time` "
+                    "followed by the exact `time_tai_ns`")] = "iso",
     sensor: str | None = None,
 ) -> Response:
     """Stored samples in [start, end], sorted by sensor and time, without duplicates.
 
-    ``time`` is ISO 8601 on ``time_scale`` (UTC with a ``Z``; 23:59:60 inside leap seconds) or, with
-    ``time_format=seconds``, seconds since 1970-01-01 on that scale.
+    CSV/JSON: ``time`` is ISO 8601 on ``time_scale`` (UTC with a ``Z``; 23:59:60 inside leap seconds) or, with
+    ``time_format=seconds``, seconds since 1970-01-01 on that scale. Parquet/Arrow: ``time`` is a timestamp
+    (ns; tz UTC on the UTC scale, where a leap second holds at the next midnight) and ``time_tai_ns`` the
+    exact integer TAI nanoseconds; such a file uploads again unchanged.
     """
     table = service.read(session, store, name, stream, who, start, end, time_scale, sensor,
                          max_rows=settings.max_read_rows)
