@@ -36,7 +36,8 @@ class Settings:
     heartbeat_timeout_s: int = 60
     max_upload_rows: int = 20_000_000
     max_upload_days: int = 1000  # distinct TAI days (one Parquet file each) per upload
-    max_read_rows: int = 20_000_000  # rows one telemetry read (GET) may return
+    max_read_rows: int = 20_000_000  # rows one telemetry read (GET) may return as Parquet (or read whole)
+    stream_read_rows: int = 1_000_000  # CSV/JSON/Arrow reads of windows holding more are streamed in chunks
     rate_limit_per_minute: int = 1200
     auth_failures_per_minute: int = 20  # failed authentications per client address before 429
     cors_origins: tuple[str, ...] = ()
@@ -74,6 +75,7 @@ class Settings:
             max_upload_rows=_int_env(env, "ATTITUDE_MAX_UPLOAD_ROWS", 20_000_000),
             max_upload_days=_int_env(env, "ATTITUDE_MAX_UPLOAD_DAYS", 1000),
             max_read_rows=_int_env(env, "ATTITUDE_MAX_READ_ROWS", 20_000_000),
+            stream_read_rows=_int_env(env, "ATTITUDE_STREAM_READ_ROWS", 1_000_000),
             rate_limit_per_minute=_int_env(env, "ATTITUDE_RATE_LIMIT_PER_MINUTE", 1200),
             auth_failures_per_minute=_int_env(env, "ATTITUDE_AUTH_FAILURES_PER_MINUTE", 20),
             min_schedule_period_s=_int_env(env, "ATTITUDE_MIN_SCHEDULE_PERIOD_S", 60),

@@ -10,7 +10,7 @@ from __future__ import annotations
 import datetime as dt
 import logging
 import re
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -220,6 +220,59 @@ def read_window(session: Session, store: ParquetStore, spacecraft_id: int, spec:
     if sensor is not None:
         table = table.filter(pa.compute.equal(table.column("sensor"), sensor))
     return _sort_unique(table, spec).select(list(empty_table(spec).schema.names))
+
+
+def window_rows(session: Session, spacecraft_id: int, spec: StreamSpec, start_tai_ns: int | None = None,
+                end_tai_ns: int | None = None, sensor: str | None = None) -> int:
+    """Stored rows of the files that overlap the window (an upper bound of a read's rows), from the catalog."""
+    files = _files_in_window(session, spacecraft_id, spec.name, start_tai_ns, end_tai_ns)
+    return sum(f.rows for f in files if sensor is None or sensor in f.sensors.split(","))
+
+
+def _chunk_bounds(files: list[TelemetryFile], lo: int, hi: int, chunk_rows: int) -> list[tuple[int, int]]:
+    """Consecutive inclusive time ranges [a, b] covering [lo, hi], cut at file starts so that each range's
+    files hold about chunk_rows rows (files sorted by start)."""
+    cuts: list[int] = []
+    acc = 0
+    for f, nxt in zip(files, files[1:], strict=False):
+        acc += f.rows
+        if acc >= chunk_rows and lo < nxt.t_min_tai_ns <= hi and (not cuts or nxt.t_min_tai_ns > cuts[-1]):
+            cuts.append(int(nxt.t_min_tai_ns))
+            acc = 0
+    edges = [lo, *cuts, hi + 1]
+    return [(a, b - 1) for a, b in zip(edges[:-1], edges[1:], strict=True)]
+
+
+def iter_window(session: Session, store: ParquetStore, spacecraft_id: int, spec: StreamSpec,
+                start_tai_ns: int | None = None, end_tai_ns: int | None = None, sensor: str | None = None,
+                chunk_rows: int = 1_000_000) -> Iterator[pa.Table]:
+    """The rows of :func:`read_window`, in the same order (identity: sensor, key, time), as consecutive
+    tables of a few files each (about ``chunk_rows`` stored rows): memory stays that of one chunk for any
+    window. Quarantined files are refused before the first chunk; a file found damaged while streaming
+    raises DamagedFileError then (the caller has already sent part of the answer)."""
+    files = _files_in_window(session, spacecraft_id, spec.name, start_tai_ns, end_tai_ns)
+    for f in files:
+        if f.quarantined:
+            raise DamagedFileError(f.path, f.quarantined, ingest_id=f.ingest_id, stream=f.stream)
+    sensors = sorted({s for f in files for s in f.sensors.split(",")} if sensor is None else {sensor})
+    names = list(empty_table(spec).schema.names)
+    for s in sensors:
+        mine = sorted((f for f in files if s in f.sensors.split(",")), key=lambda f: f.t_min_tai_ns)
+        if not mine:
+            continue
+        lo = int(min(f.t_min_tai_ns for f in mine)) if start_tai_ns is None else max(int(start_tai_ns), int(
+            min(f.t_min_tai_ns for f in mine)))
+        hi = int(max(f.t_max_tai_ns for f in mine)) if end_tai_ns is None else min(int(end_tai_ns), int(
+            max(f.t_max_tai_ns for f in mine)))
+        for a, b in _chunk_bounds(mine, lo, hi, chunk_rows):
+            group = [f for f in mine if f.t_max_tai_ns >= a and f.t_min_tai_ns <= b]
+            tables = _read_files(session, store, group, a, b)
+            if not tables:
+                continue
+            table = pa.concat_tables(tables, promote_options="permissive")
+            table = table.filter(pa.compute.equal(table.column("sensor"), s))
+            if table.num_rows:
+                yield _sort_unique(table, spec).select(names)
 
 
 def read_series(session: Session, store: ParquetStore, spacecraft_id: int, spec: StreamSpec, sensor: str,

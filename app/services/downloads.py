@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import io
 import json
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import pyarrow as pa
 import pyarrow.csv as pacsv
@@ -80,6 +82,46 @@ def table_download(table: pa.Table, fmt: str, time_scale: str, time_format: str,
     (ISO or seconds); Parquet/Arrow: a timestamp ``time`` on that scale beside ``time_tai_ns``."""
     timed = with_timestamps(table, time_scale) if fmt in BINARY_FORMATS else with_times(table, time_scale, time_format)
     return Download(encode(timed, fmt), FORMATS[fmt], f"{stem}.{fmt}")
+
+
+STREAMED_FORMATS = ("csv", "json", "arrow")
+"""Formats written chunk by chunk as the rows are read (constant memory); Parquet needs the whole file."""
+
+
+def stream_chunks(chunks: Iterator[pa.Table], fmt: str, time_scale: str, time_format: str) -> Iterator[bytes]:
+    """The encoded download of consecutive tables: one CSV header, one JSON array, one Arrow IPC stream."""
+    first = True
+    writer: Any = None
+    sink = io.BytesIO()
+    for table in chunks:
+        timed = with_timestamps(table, time_scale) if fmt in BINARY_FORMATS else with_times(table, time_scale,
+                                                                                             time_format)
+        if fmt == "csv":
+            buf = io.BytesIO()
+            pacsv.write_csv(csv_safe(timed), buf, write_options=pacsv.WriteOptions(include_header=first))
+            yield buf.getvalue()
+        elif fmt == "json":
+            body = json.dumps(jsonable(timed.to_pylist()), ensure_ascii=False, allow_nan=False,
+                              separators=(",", ":"))[1:-1]
+            if body:
+                yield (("[" if first else ",") + body).encode("utf-8")
+                first = False
+            continue
+        else:
+            if writer is None:
+                writer = pa.ipc.new_stream(sink, timed.schema)
+            writer.write_table(timed)
+            yield sink.getvalue()
+            sink.seek(0)
+            sink.truncate()
+        first = False
+    if fmt == "json":
+        yield b"[]" if first else b"]"
+    elif fmt == "csv" and first:
+        yield b""
+    elif fmt == "arrow" and writer is not None:
+        writer.close()
+        yield sink.getvalue()
 
 
 @dataclass(frozen=True)

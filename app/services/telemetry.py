@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import replace
 from typing import Any
 
@@ -23,7 +24,15 @@ from processing.streams import STREAMS, StreamSpec
 from processing.units import NS_PER_DAY
 from storage.models import Ingest, Spacecraft
 from storage.parquet_store import ParquetStore
-from storage.telemetry import IngestMeta, TooManyRowsToRead, commit_ingest, read_window
+from storage.telemetry import (
+    IngestMeta,
+    TooManyRowsToRead,
+    commit_ingest,
+    empty_table,
+    iter_window,
+    read_window,
+    window_rows,
+)
 
 SINGLE_SENSOR_KINDS = {"gyro": "gyro", "magnetometer": "magnetometer", "sun_sensor": "sun_sensor"}
 
@@ -127,6 +136,26 @@ def read(session: Session, store: ParquetStore, name: str, stream: str, who: Pri
         return read_window(session, store, sc.id, spec, t0, t1, sensor, max_rows=max_rows)
     except TooManyRowsToRead as exc:
         raise TooLarge(str(exc)) from None
+
+
+def read_chunks(session: Session, store: ParquetStore, name: str, stream: str, who: Principal, start: str | None,
+                end: str | None, time_scale: str, sensor: str | None = None,
+                stream_above_rows: int = 1_000_000) -> Iterator[pa.Table] | None:
+    """The read of :func:`read` as consecutive tables when the window holds more than ``stream_above_rows``
+    stored rows (None below: read it whole). Access, the window and quarantined files are checked now."""
+    spec = get_stream(stream)
+    sc = get_spacecraft(session, name, who)
+    t0, t1 = parse_window(start, end, time_scale)
+    if window_rows(session, sc.id, spec, t0, t1, sensor) <= stream_above_rows:
+        return None
+    chunks = iter_window(session, store, sc.id, spec, t0, t1, sensor, chunk_rows=stream_above_rows)
+    first = next(chunks, None)  # quarantined files refused here, before the answer starts
+
+    def all_chunks() -> Iterator[pa.Table]:
+        yield empty_table(spec) if first is None else first
+        yield from chunks
+
+    return all_chunks()
 
 
 def list_ingests(session: Session, name: str, who: Principal, stream: str | None, cursor: str | None,

@@ -8,7 +8,7 @@ from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, Query, Request, Response, status
 from fastapi.concurrency import run_in_threadpool
-from fastapi.responses import JSONResponse
+from fastapi.responses import JSONResponse, StreamingResponse
 from pydantic import BaseModel
 
 from app.api.deps import Operator, SessionDep, SettingsDep, StoreDep, Viewer
@@ -17,7 +17,7 @@ from app.api.pagination import MAX_LIMIT, announce_next
 from app.ingest.errors import UploadError
 from app.ingest.parse import SUPPORTED_TYPES
 from app.services import telemetry as service
-from app.services.downloads import FORMATS, table_download
+from app.services.downloads import FORMATS, STREAMED_FORMATS, stream_chunks, table_download
 from app.services.spacecraft import get_spacecraft, latest_config
 from app.services.times import iso
 from storage.models import Ingest
@@ -120,6 +120,13 @@ def read_telemetry(
     (ns; tz UTC on the UTC scale, where a leap second holds at the next midnight) and ``time_tai_ns`` the
     exact integer TAI nanoseconds; such a file uploads again unchanged.
     """
+    if format in STREAMED_FORMATS:  # a large window is written as it is read: constant memory
+        chunks = service.read_chunks(session, store, name, stream, who, start, end, time_scale, sensor,
+                                     stream_above_rows=settings.stream_read_rows)
+        if chunks is not None:
+            return StreamingResponse(stream_chunks(chunks, format, time_scale, time_format),
+                                     media_type=FORMATS[format], headers={
+                                         "Content-Disposition": f'attachment; filename="{name}_{stream}.{format}"'})
     table = service.read(session, store, name, stream, who, start, end, time_scale, sensor,
                          max_rows=settings.max_read_rows)
     return download_response(table_download(table, format, time_scale, time_format, f"{name}_{stream}"))
