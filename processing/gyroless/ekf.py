@@ -11,9 +11,8 @@ unit vectors of the field and of the Sun in B against their reference directions
 the sun sensor may be absent at any step (eclipse, outage), the filter then runs on the magnetometer.
 
 - :class:`processing.gyroless.ekf004.GyrolessEKF` -- the filter of 004 (fig. 2): state z = (w_BI^B, q, tau_d,x,
-  tau_d,y) (9), the
-  quaternion updated additively and normalised after each update (004, after [4], [10]; the
-  covariance is left as the additive update gives it, as in 004);
+  tau_d,y) (9), the quaternion updated additively and normalised after each update (004, after [4], [10];
+  the covariance is left as the additive update gives it, as in 004);
   Phi = I + F T_s with F the Jacobian of the state equations; H = [0 h1 h2 h3 h4 0] with
   h_k = d(dcm_BO v)/dq_k for v = B^orb, S^orb; R = sigma^2 I per vector. Departures from the printed
   formulas, all to make them exact derivatives: F includes d w_BO / dq (the term w0 c2(q) of w_BO;
