@@ -232,7 +232,7 @@ def noise_meat(jac: FloatArray, weight: FloatArray, gain: FloatArray, window: ND
     """M = J^T W Cov(e) W J (p, p) for rate errors e_i = sum_k gain_ik n_k of white star-tracker angle noise.
 
     jac (n, 3, p), weight (n,) the estimate's weights, gain (n, width): the rate error of T_p sample i
-    per unit angle noise at the k-th star-tracker sample of its window (alignment.WindowRates.rate_noise_gain),
+    per unit angle noise at the k-th star-tracker sample of its window (window_rates.WindowRates.rate_noise_gain),
     window (n,) window ids 0..W-1 (each window's samples its own: windows do not share star-tracker
     samples), sigma_rad (3,) the star-tracker angle noise per axis. With H_wk = sum_{i in w} w_i gain_ik J_i,
     M = sum_w sum_k H_wk^T diag(sigma^2) H_wk.

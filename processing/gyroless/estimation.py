@@ -19,12 +19,12 @@ Pipeline (pure, arrays in, dataclass out):
    w_BO = 0. Steps before it are dropped.
 7. Filter (004's EKF or the MEKF; optionally with the magnetometer bias and a Gauss-Markov field error as
    states, processing.gyroless.ekf.ModelErrorStates), optional RTS smoother (processing.gyroless.rts_smoother);
-   consistency statistics (processing.estimation.consistency) and gates (:func:`filter_consistency`).
+   consistency statistics (processing.estimation.consistency) and gates
+   (processing.gyroless.consistency_gates.filter_consistency, with the convergence time).
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -36,25 +36,22 @@ from processing.attitude.rigid_body import q_OB_from_roll_pitch_yaw_004, roll_pi
 from processing.environment.eclipse import sunlit_fraction
 from processing.environment.igrf import igrf_field_E_nT
 from processing.environment.sun import sun_position_I_m
-from processing.estimation.chi2 import chi2_ppf
 from processing.estimation.consistency import (
     ChiSquareStats,
-    LjungBoxStats,
     WhitenessStats,
     chi_square_stats,
-    ljung_box,
     whiteness,
 )
 from processing.frames.earth_orientation import EarthOrientation
 from processing.frames.earth_rotation_interp import itrs_to_gcrs_state_interp
 from processing.frames.orbital import dcm_IO_lvlh_004
+from processing.gyroless.consistency_gates import FilterConsistency, convergence_time, filter_consistency
 from processing.gyroless.ekf import FilterTuning, ModelErrorStates
 from processing.gyroless.filtering import FilterRun, GyrolessInputs, model_error_series, run_filter, triad_q_OB
 from processing.gyroless.rts_smoother import SmoothedRun, rts_smooth
 from processing.units import MU_EARTH_M3_S2, NS_PER_S, RAD_PER_DEG
 
 __all__ = [
-    "FilterConsistency",
     "GyrolessError",
     "GyrolessResult",
     "GyrolessSettings",
@@ -62,7 +59,6 @@ __all__ = [
     "TUNING_DEFAULT",
     "TUNING_WITH_MODEL_ERRORS",
     "estimate_gyroless_attitude",
-    "filter_consistency",
     "hermite_state",
     "prepare_gyroless_inputs",
 ]
@@ -213,117 +209,6 @@ def _mounting(q: ArrayLike | None, name: str) -> NDArray:
         raise GyrolessError(f"{name} must be 4 finite numbers of unit norm (scalar first), got {q!r}")
     return rotations.quat_to_dcm(a)
 
-
-def _convergence(t_s: NDArray, sigma_deg: NDArray, nis: NDArray, dof: NDArray, threshold_deg: float,
-                 window_s: float) -> float | None:
-    """First time from which, over a window, the mean NIS lies within its 99 % chi^2 interval and the
-    largest 1-sigma attitude bound is below threshold_deg. None if never."""
-    ok = np.isfinite(nis) & (dof > 0)
-    if not np.any(ok):
-        return None
-    cs_n = np.concatenate([[0.0], np.cumsum(np.where(ok, nis, 0.0))])
-    cs_d = np.concatenate([[0.0], np.cumsum(np.where(ok, dof, 0.0))])
-    cs_c = np.concatenate([[0], np.cumsum(ok)])
-    j = np.searchsorted(t_s, t_s + window_s, side="right")  # window [k, j)
-    k = np.arange(t_s.size)
-    full = t_s + window_s <= t_s[-1]
-    cnt = cs_c[j] - cs_c[k]
-    tot_d = cs_d[j] - cs_d[k]
-    mean = (cs_n[j] - cs_n[k]) / np.maximum(cnt, 1)
-    lo = chi2_ppf(0.005, np.maximum(tot_d, 1)) / np.maximum(cnt, 1)
-    hi = chi2_ppf(0.995, np.maximum(tot_d, 1)) / np.maximum(cnt, 1)
-    good = full & (cnt > 0) & (mean >= lo) & (mean <= hi) & (sigma_deg <= threshold_deg)
-    idx = np.flatnonzero(good)
-    return float(t_s[idx[0]] - t_s[0]) if idx.size else None
-
-
-NIS_TOLERANCE = 0.1
-"""The mean NIS fails its test when it is outside its 99 % chi^2 interval AND off its degrees of freedom by more
-than this fraction (with thousands of updates the interval alone is ~1 % wide: a slightly wrong noise level
-would flag every arc; a model error that matters moves it by tens of per cent)."""
-NIS_WINDOW_FRACTION_MAX = 0.2
-"""...and the windows (``nis_window_s``, non-overlapping) fail when more than this fraction of them do so."""
-RHO_MAX = 0.1
-"""Whiteness fails when the Ljung-Box test rejects (adjusted p < LJUNG_BOX_P_MIN) AND some autocorrelation of
-the whitened innovations (lags 1..WHITENESS_MAX_LAG) exceeds RHO_MAX in size (the effect size: a correlation
-of 0.1 at lag 1 inflates the variance of a mean by ~20 %; model errors of the magnetometer give 0.3-0.7)."""
-LJUNG_BOX_P_MIN = 1e-3
-WHITENESS_MAX_LAG = 20
-
-
-@dataclass(frozen=True)
-class FilterConsistency:
-    """The consistency gates of a filter pass over the tested segment (from ``start_s``, seconds since the
-    first step: the convergence time, else the end of the first NIS window).
-
-    nis: chi^2 statistics of the NIS over the segment; nis_bounds_99: 99 % interval of its mean (with the
-    summed degrees of freedom); nis_ok: the mean passes (see NIS_TOLERANCE). n_windows, windows_failed:
-    non-overlapping windows of window_s and how many fail the same test; windows_ok. ljung: Ljung-Box
-    test of the whitened innovations; max_abs_rho; whiteness_ok. consistent: all three pass; reasons:
-    what failed, in words."""
-
-    start_s: float
-    nis: ChiSquareStats
-    nis_bounds_99: tuple[float, float]
-    nis_ok: bool
-    window_s: float
-    n_windows: int
-    windows_failed: int
-    windows_ok: bool
-    ljung: LjungBoxStats
-    max_abs_rho: float
-    whiteness_ok: bool
-    consistent: bool
-    reasons: tuple[str, ...]
-
-
-def _nis_mean_fails(nis: NDArray, dof: NDArray) -> tuple[bool, float, float, float, float]:
-    """(fails, mean, mean dof, lo, hi) of the mean of NIS values with their dof against its 99 % interval."""
-    n, tot = nis.size, float(dof.sum())
-    if n == 0:
-        return False, math.nan, math.nan, math.nan, math.nan
-    lo, hi = chi2_ppf(0.005, tot) / n, chi2_ppf(0.995, tot) / n
-    mean, mdof = float(nis.mean()), tot / n
-    return (not lo <= mean <= hi) and abs(mean / mdof - 1.0) > NIS_TOLERANCE, mean, mdof, float(lo), float(hi)
-
-
-def filter_consistency(t_s: NDArray, nis: NDArray, dof: NDArray, whitened: NDArray, start_s: float,
-                       window_s: float) -> FilterConsistency:
-    """NIS (mean over the segment from start_s and over its windows of window_s) and whiteness (Ljung-Box
-    over lags 1..WHITENESS_MAX_LAG) of a filter pass: t_s (K,) [s], nis (K,), dof (K,) (NaN/0 where no
-    update), whitened (K, C) whitened innovation components (NaN padded)."""
-    seg = (t_s - t_s[0] >= start_s) & np.isfinite(nis) & (dof > 0)
-    v, d = nis[seg], dof[seg]
-    fails, mean, mdof, lo, hi = _nis_mean_fails(v, d)
-    st = chi_square_stats(v, d)
-    ts = t_s[seg] - t_s[0] - start_s
-    win = np.floor(ts / window_s).astype(np.int64) if ts.size else np.zeros(0, np.int64)
-    n_win, failed = 0, 0
-    for w in np.unique(win):
-        m = win == w
-        if ts[m].size and ts[m][-1] - ts[m][0] >= 0.5 * window_s:  # full enough windows only
-            n_win += 1
-            failed += int(_nis_mean_fails(v[m], d[m])[0])
-    windows_ok = n_win == 0 or failed <= NIS_WINDOW_FRACTION_MAX * n_win
-    wseg = whitened[(t_s - t_s[0] >= start_s)]
-    lb = ljung_box(wseg, max_lag=WHITENESS_MAX_LAG)
-    wh = whiteness(wseg, max_lag=WHITENESS_MAX_LAG)
-    rho_max = wh.max_abs_rho
-    whiteness_ok = not (np.isfinite(lb.p_min_adjusted) and lb.p_min_adjusted < LJUNG_BOX_P_MIN
-                        and rho_max > RHO_MAX)
-    reasons = []
-    if fails:
-        reasons.append(f"mean NIS {mean:.2f} outside its 99 % interval [{lo:.2f}, {hi:.2f}] for {mdof:.2f} "
-                       "degrees of freedom")
-    if not windows_ok:
-        reasons.append(f"mean NIS outside its 99 % interval in {failed} of {n_win} windows of {window_s:g} s")
-    if not whiteness_ok:
-        reasons.append(f"innovations correlated in time (Ljung-Box p = {lb.p_min_adjusted:.1e}, largest "
-                       f"autocorrelation {rho_max:.2f} > {RHO_MAX:g})")
-    return FilterConsistency(start_s=float(start_s), nis=st, nis_bounds_99=(lo, hi), nis_ok=not fails,
-                             window_s=float(window_s), n_windows=n_win, windows_failed=failed, windows_ok=windows_ok,
-                             ljung=lb, max_abs_rho=rho_max, whiteness_ok=whiteness_ok,
-                             consistent=not reasons, reasons=tuple(reasons))
 
 
 def prepare_gyroless_inputs(
@@ -580,7 +465,7 @@ def estimate_gyroless_attitude(
     q_IB = rotations.quat_canonical(rotations.quat_multiply(rotations.dcm_to_quat(dcm_IO), q_OB))
     nis_st = chi_square_stats(run.nis, run.nis_dof)
     white = whiteness(run.whitened[:, :4] if s.filter == "mekf" else run.whitened, max_lag=20)
-    t_conv = _convergence(inputs.t_s, np.degrees(run.attitude_sigma_rad.max(axis=1)), run.nis, run.nis_dof,
+    t_conv = convergence_time(inputs.t_s, np.degrees(run.attitude_sigma_rad.max(axis=1)), run.nis, run.nis_dof,
                           s.converged_sigma_deg, s.nis_window_s)
     start = t_conv if t_conv is not None else min(s.nis_window_s, float(inputs.t_s[-1] - inputs.t_s[0]) / 2)
     gate = filter_consistency(inputs.t_s, run.nis, run.nis_dof, run.whitened[:, :4] if s.filter == "mekf"

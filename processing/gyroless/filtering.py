@@ -16,7 +16,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from processing.attitude import rotations
-from processing.gyroless.ekf import NO_MODEL_ERRORS, FilterTuning, GyrolessEKF, ModelErrorStates
+from processing.gyroless.ekf import NO_MODEL_ERRORS, FilterTuning, ModelErrorStates
+from processing.gyroless.ekf004 import GyrolessEKF
 from processing.gyroless.mekf import GyrolessMEKF
 
 __all__ = [

@@ -335,22 +335,11 @@ def long_run_variance_factor(x: NDArray[np.float64], window: int) -> float:
     return float(max(1.0, 1.0 + 2.0 * np.sum((1.0 - k / (L + 1)) * rho)))
 
 
-def calibrate_magnetometer(
-    B_meas_M_nT: ArrayLike,
-    B_ref_norm_nT: ArrayLike,
-    *,
-    sample_period_s: float,
-    mu_B_A_m2: ArrayLike | None = None,
-    settings: CalibrationSettings | None = None,
-) -> MagnetometerCalibration:
-    """Bias, scale factors, non-orthogonality (and magnetorquer coupling) from |B| matching.
-
-    B_meas_M_nT (N, 3) nT measured field in the magnetometer frame; B_ref_norm_nT (N,) nT field-model
-    magnitude at the same instants; sample_period_s: the (median) sampling period [s] (lags of the
-    whiteness test and the correlation window); mu_B_A_m2 (N, 3) A m^2 dipole held at each sample
-    (required with settings.estimate_coupling). Module docstring: model, noise, observability.
-    """
-    st = CalibrationSettings() if settings is None else settings
+def _checked_inputs(B_meas_M_nT: ArrayLike, B_ref_norm_nT: ArrayLike, sample_period_s: float,
+                    mu_B_A_m2: ArrayLike | None, st: CalibrationSettings
+                    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64] | None, int]:
+    """(H (N, 3), |B_ref| (N,), mu (N, 3) or None, number of parameters) after the checks of shapes, sample
+    count and finiteness; raises :class:`MagnetometerCalibrationError`."""
     H = np.asarray(B_meas_M_nT, dtype=np.float64)
     ref = np.asarray(B_ref_norm_nT, dtype=np.float64)
     n_params = 18 if st.estimate_coupling else 9
@@ -374,12 +363,15 @@ def calibrate_magnetometer(
         raise MagnetometerCalibrationError(f"{int(np.sum(~finite))} samples are not finite (or |B_ref| <= 0)")
     if not sample_period_s > 0:
         raise MagnetometerCalibrationError(f"sample_period_s must be > 0, got {sample_period_s}")
+    return H, ref, mu, n_params
 
-    notes: list[str] = []
-    before = field_residual_nT(H, ref)
-    p0 = _linear_start(H, ref, n_params)
-    if not np.any(p0):
-        notes.append("the linear first step was degenerate (field direction hardly changes): started from zero")
+
+def _fit_with_outliers(p0: NDArray[np.float64], H: NDArray[np.float64], ref: NDArray[np.float64],
+                       mu: NDArray[np.float64] | None, n_params: int, st: CalibrationSettings
+                       ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], float, int, bool,
+                                  NDArray[np.bool_]]:
+    """Steps 2-3: Gauss-Newton, then once more without the samples beyond ``outlier_sigma`` MAD sigmas.
+    Returns p, r, J, s^2, iterations, converged and the samples used (N,)."""
     used = np.ones(H.shape[0], dtype=bool)
     nv = None if st.magnetometer_noise_nT is None else st.magnetometer_noise_nT**2
     p, r, J, s2, iterations, converged = _gauss_newton(p0, H, ref, mu, st.max_iterations, nv)
@@ -391,16 +383,15 @@ def calibrate_magnetometer(
             mu_u = None if mu is None else mu[used]
             p, r, J, s2, it2, converged = _gauss_newton(p, H[used], ref[used], mu_u, st.max_iterations, nv)
             iterations += it2
-    errors_full = _unpack(p)
-    after = field_residual_nT(H, ref, errors_full, mu)
+    return p, r, J, s2, iterations, converged, used
 
-    # whiteness and inflation
-    lags = int(min(st.whiteness_lags, max(1, r.size // 5)))
-    q, dof_w, p_w, rho = ljung_box(r, lags)
-    window = int(round(st.correlation_window_s / sample_period_s))
-    lrf = long_run_variance_factor(r, window)
-    inflation = lrf if p_w < st.test_level else 1.0
 
+def _covariance_and_observability(J: NDArray[np.float64], s2: float, inflation: float, n_params: int,
+                                  st: CalibrationSettings
+                                  ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64],
+                                             NDArray[np.bool_]]:
+    """Covariance (with the weak prior, inflated), sigmas, relative singular values of the information in
+    tolerance units and the observable parameters (sigma within tolerance, outside the null space)."""
     prior_w = 1.0 / _PRIOR_SIGMA[:n_params] ** 2
     N_info = _gram(J) / s2
     cov = np.asarray(np.linalg.inv(N_info + np.diag(prior_w)) * inflation, dtype=np.float64)
@@ -414,17 +405,61 @@ def calibrate_magnetometer(
     null = lam < st.rank_rtol * max(float(lam[-1]), 1e-300)
     in_null = np.sum(V[:, null] ** 2, axis=1) > 0.01 if np.any(null) else np.zeros(n_params, dtype=bool)
     observable = (sigma <= tol) & ~in_null
+    return cov, sigma, rel, observable
+
+
+def _chi2_test(errors_full: MagnetometerErrors, H: NDArray[np.float64], mu: NDArray[np.float64] | None,
+               used: NDArray[np.bool_], r: NDArray[np.float64], n_params: int, noise_nT: float,
+               field_model_error_nT: float) -> tuple[float, int, float]:
+    """(statistic, dof, two-sided p) of the residuals against the stated magnetometer and field-model noise."""
+    x = errors_full.correct(H[used], None if mu is None else mu[used])
+    u = x / np.linalg.norm(x, axis=1, keepdims=True)
+    Mu = np.linalg.solve(np.eye(3) + errors_full.D, u.T).T
+    var = noise_nT**2 * np.sum(Mu**2, axis=1) + field_model_error_nT**2
+    stat = float(np.sum(r**2 / var))
+    dof = int(r.size - n_params)
+    p_two = float(2.0 * min(chi2_cdf(stat, dof), chi2_sf(stat, dof)))
+    return stat, dof, p_two
+
+
+def calibrate_magnetometer(
+    B_meas_M_nT: ArrayLike,
+    B_ref_norm_nT: ArrayLike,
+    *,
+    sample_period_s: float,
+    mu_B_A_m2: ArrayLike | None = None,
+    settings: CalibrationSettings | None = None,
+) -> MagnetometerCalibration:
+    """Bias, scale factors, non-orthogonality (and magnetorquer coupling) from |B| matching.
+
+    B_meas_M_nT (N, 3) nT measured field in the magnetometer frame; B_ref_norm_nT (N,) nT field-model
+    magnitude at the same instants; sample_period_s: the (median) sampling period [s] (lags of the
+    whiteness test and the correlation window); mu_B_A_m2 (N, 3) A m^2 dipole held at each sample
+    (required with settings.estimate_coupling). Module docstring: model, noise, observability.
+    """
+    st = CalibrationSettings() if settings is None else settings
+    H, ref, mu, n_params = _checked_inputs(B_meas_M_nT, B_ref_norm_nT, sample_period_s, mu_B_A_m2, st)
+
+    notes: list[str] = []
+    before = field_residual_nT(H, ref)
+    p0 = _linear_start(H, ref, n_params)
+    if not np.any(p0):
+        notes.append("the linear first step was degenerate (field direction hardly changes): started from zero")
+    p, r, J, s2, iterations, converged, used = _fit_with_outliers(p0, H, ref, mu, n_params, st)
+    errors_full = _unpack(p)
+    after = field_residual_nT(H, ref, errors_full, mu)
+
+    # whiteness and inflation
+    lags = int(min(st.whiteness_lags, max(1, r.size // 5)))
+    q, dof_w, p_w, rho = ljung_box(r, lags)
+    window = int(round(st.correlation_window_s / sample_period_s))
+    lrf = long_run_variance_factor(r, window)
+    inflation = lrf if p_w < st.test_level else 1.0
+    cov, sigma, rel, observable = _covariance_and_observability(J, s2, inflation, n_params, st)
 
     chi2 = None
     if st.magnetometer_noise_nT is not None:
-        x = errors_full.correct(H[used], None if mu is None else mu[used])
-        u = x / np.linalg.norm(x, axis=1, keepdims=True)
-        Mu = np.linalg.solve(np.eye(3) + errors_full.D, u.T).T
-        var = st.magnetometer_noise_nT**2 * np.sum(Mu**2, axis=1) + st.field_model_error_nT**2
-        stat = float(np.sum(r**2 / var))
-        dof = int(r.size - n_params)
-        p_two = float(2.0 * min(chi2_cdf(stat, dof), chi2_sf(stat, dof)))
-        chi2 = (stat, dof, p_two)
+        chi2 = _chi2_test(errors_full, H, mu, used, r, n_params, st.magnetometer_noise_nT, st.field_model_error_nT)
 
     est = np.where(observable, p, 0.0)
     return MagnetometerCalibration(

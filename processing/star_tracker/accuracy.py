@@ -67,7 +67,9 @@ Method (003 = Avanesov et al., Keldysh Institute preprint 74, 2010):
 Inputs: times int64 TAI ns, quaternions scalar first (q_IS: sensor -> inertial), rates rad/s. SI
 inside; arcseconds only in the job layer. Vectorised over samples; loops only over segments, axes
 and lines. Layout: the 003 §1.3 building blocks are in processing.star_tracker.smoothing, steps 5 and
-7 in processing.star_tracker.accuracy_gyro; here one function per step, each returning a frozen record.
+7 in processing.star_tracker.accuracy_gyro, the residuals and sigmas of steps 3-4 (and the final smoothing
+of step 7) in processing.star_tracker.accuracy_residuals; here one function per step, each returning a frozen
+record.
 """
 
 from __future__ import annotations
@@ -79,7 +81,6 @@ from numpy.typing import ArrayLike, NDArray
 
 from processing.attitude import rotations
 from processing.signal.sine_series import Method
-from processing.signal.sine_series_fit import SineSeriesFit
 from processing.signal.spectral import Spectrum, alias_frequency, amplitude_spectrum_of_samples
 from processing.signal.spectral_lines import find_lines
 from processing.star_tracker.accuracy_gyro import (
@@ -90,13 +91,17 @@ from processing.star_tracker.accuracy_gyro import (
     analyze_gyro,
     gyro_comparison,
 )
+from processing.star_tracker.accuracy_residuals import (
+    Residuals,
+    SegmentFit,
+    correct_segment,
+    pool_residuals,
+    pooled_sigmas,
+)
 from processing.star_tracker.robust import OUTLIER_ALPHA, OutlierRejection, reject_outliers
 from processing.star_tracker.smoothing import (
     SegmentSmoothing,
-    rate_from_mrp,
-    residual_mrps,
     seconds_since,
-    sensor_axis_residuals,
     smooth_segment,
     split_segments,
 )
@@ -111,8 +116,6 @@ __all__ = [
     "analyze_star_tracker_accuracy",
 ]
 
-MAD_TO_SIGMA = 1.482602218505602
-"""1 / Phi^-1(3/4): MAD of a normal sample times this is its standard deviation."""
 MIN_SEGMENT_SAMPLES = 12
 
 
@@ -126,25 +129,6 @@ def _noop(fraction: float, stage: str) -> None:
 
 # ---------------------------------------------------------------------------------------------
 # Results
-
-
-@dataclass(frozen=True)
-class SegmentFit:
-    """One smoothed segment: rows [start, stop) of the star-tracker samples, its harmonics and
-    cutoff M/(2T) [Hz], fit route, span [s], dof = N - M - 2, residual sums of squares [rad^2]
-    about x1 x2 x3 raw (rss_smoothing) and after removing real motion (rss), and the mean
-    quaternion q_c of 003 §1.3."""
-
-    start: int
-    stop: int
-    harmonics: int
-    cutoff_hz: float
-    method: str
-    span_s: float
-    dof: int
-    rss_smoothing_rad2: NDArray
-    rss_rad2: NDArray
-    q_c: NDArray
 
 
 @dataclass(frozen=True)
@@ -300,127 +284,6 @@ def _gyro_rates(gyro_time_tai_ns: ArrayLike, w_G_rad_s: ArrayLike, q_BG: ArrayLi
     return g_ns, rotations.quat_rotate(rotations.quat_normalize(np.asarray(q_BG, dtype=np.float64)), w_G)
 
 
-@dataclass(frozen=True)
-class _Corrected:
-    """Final smoothing of one segment: the removed oscillation motion_S (N, 3), the MRPs of the
-    corrected quaternions z (N, 3) and their fit (the raw ones when nothing was removed)."""
-
-    seg: SegmentSmoothing
-    motion_S: NDArray
-    z: NDArray
-    fit: SineSeriesFit
-
-
-def _correct(seg: SegmentSmoothing, motion_S: NDArray) -> _Corrected:
-    """Step 7, last part: q_n' = q_n o exp(-theta_S(t_n)) smoothed again (M chosen again if automatic)."""
-    if not np.any(motion_S):
-        return _Corrected(seg, motion_S, seg.z, seg.fit_raw)
-    q_corr = rotations.quat_multiply(seg.q, rotations.rotvec_to_quat(-motion_S))
-    z_corr = residual_mrps(q_corr, seg.q_c)
-    return _Corrected(seg, motion_S, z_corr, seg.smooth(z_corr))
-
-
-@dataclass(frozen=True)
-class _Residuals:
-    """Steps 3-4 per star-tracker sample (N rows, NaN outside the segments; ``rows`` those inside, ``ok``
-    those inside and accepted (not outliers), ``outlier`` (N,) bool): segment index, raw MRPs and their
-    fit, residuals raw / eq. 2 / corrected, removed motion, w_S; the per-segment summaries (sums over
-    the accepted samples) and the pooled degrees of freedom (raw, corrected)."""
-
-    rows: NDArray
-    ok: NDArray
-    outlier: NDArray
-    segment: NDArray
-    z: NDArray
-    z_fit: NDArray
-    e_raw: NDArray
-    e_eq2: NDArray
-    e_cor: NDArray
-    motion: NDArray
-    w_S: NDArray
-    segments: tuple[SegmentFit, ...]
-    dof_raw: int
-    dof_cor: int
-
-
-def _residuals(n_all: int, corrected: tuple[_Corrected, ...]) -> _Residuals:
-    """Steps 3-4: residuals about the sensor axes and rates from the final smoothing."""
-    rows = np.concatenate([np.arange(c.seg.sl.start, c.seg.sl.stop) for c in corrected])
-    z_all, z_fit_all, e_raw, e_eq2, e_cor, w_S = (np.full((n_all, 3), np.nan) for _ in range(6))
-    motion = np.zeros((n_all, 3))
-    outlier = np.zeros(n_all, dtype=bool)
-    seg_index = np.full(n_all, -1, dtype=np.int64)
-    seg_out = []
-    dof_raw = dof_cor = 0
-    for i, c in enumerate(corrected):
-        seg, sl, fit = c.seg, c.seg.sl, c.fit
-        z_all[sl] = seg.z
-        z_fit_all[sl] = seg.fit_raw.fitted
-        e_raw[sl] = sensor_axis_residuals(seg.z, seg.fit_raw.fitted)
-        e_eq2[sl] = 4.0 * (seg.z - seg.fit_raw.fitted)
-        e_cor[sl] = sensor_axis_residuals(c.z, fit.fitted)
-        motion[sl] = c.motion_S
-        w_S[sl] = rate_from_mrp(fit.fitted, seg.solver.derivative_at_samples(fit))
-        seg_index[sl] = i
-        outlier[sl] = ~seg.accepted
-        dof_raw += seg.fit_raw.dof
-        dof_cor += fit.dof
-        acc = seg.accepted
-        seg_out.append(SegmentFit(
-            sl.start, sl.stop, fit.harmonics, fit.cutoff_hz, fit.method, fit.span_s, fit.dof,
-            np.sum(e_raw[sl][acc] ** 2, axis=0), np.sum(e_cor[sl][acc] ** 2, axis=0), seg.q_c,
-        ))
-    if dof_cor <= 0:
-        raise StarTrackerAccuracyError("no residual degrees of freedom: fewer harmonics are needed")
-    ok = rows[~outlier[rows]]
-    return _Residuals(rows, ok, outlier, seg_index, z_all, z_fit_all, e_raw, e_eq2, e_cor, motion, w_S,
-                      tuple(seg_out), dof_raw, dof_cor)
-
-
-@dataclass(frozen=True)
-class _Sigmas:
-    """Step 3, per axis (3,) rad: sensor noise, 003's smoothing figure, robust (MAD) versions, eq. 2
-    literally, and the rms of the removed motion."""
-
-    sigma: NDArray
-    smoothing: NDArray
-    robust: NDArray
-    smoothing_robust: NDArray
-    eq2: NDArray
-    motion_rms: NDArray
-
-
-def _pooled(rss: NDArray, dof: int) -> NDArray:
-    return np.sqrt(rss / dof) if dof > 0 else np.full(3, np.nan)
-
-
-def _robust(resid: NDArray, n: int, dof: int) -> NDArray:
-    if dof <= 0:
-        return np.full(3, np.nan)
-    mad = np.median(np.abs(resid - np.median(resid, axis=0)), axis=0)
-    return MAD_TO_SIGMA * mad * np.sqrt(n / dof)
-
-
-def _sigmas(res: _Residuals, have_gyro: bool) -> _Sigmas:
-    """Step 3: sigmas pooled over segments with the least-squares degrees of freedom (module docstring),
-    over the accepted samples."""
-    rows = res.ok
-    rss_raw = np.sum([s.rss_smoothing_rad2 for s in res.segments], axis=0)
-    rss_cor = np.sum([s.rss_rad2 for s in res.segments], axis=0)
-    sigma = _pooled(rss_cor, res.dof_cor)
-    if have_gyro:  # white part dof-corrected, removed motion (not absorbed by the fit) per sample
-        sigma_smoothing = np.sqrt(sigma**2 + np.maximum(rss_raw - rss_cor, 0.0) / rows.size)
-    else:
-        sigma_smoothing = _pooled(rss_raw, res.dof_raw)
-    return _Sigmas(
-        sigma=sigma,
-        smoothing=sigma_smoothing,
-        robust=_robust(res.e_cor[rows], rows.size, res.dof_cor),
-        smoothing_robust=_robust(res.e_raw[rows], rows.size, res.dof_raw),
-        eq2=_pooled(np.sum(res.e_eq2[rows] ** 2, axis=0), res.dof_raw),
-        motion_rms=np.sqrt(np.mean(res.motion[res.rows] ** 2, axis=0)),
-    )
-
 
 @dataclass(frozen=True)
 class _Spectra:
@@ -431,7 +294,7 @@ class _Spectra:
 
 
 def _spectra(
-    inp: _Inputs, res: _Residuals, w_B: NDArray, gyro: GyroAnalysis | None, cmp: GyroComparison | None,
+    inp: _Inputs, res: Residuals, w_B: NDArray, gyro: GyroAnalysis | None, cmp: GyroComparison | None,
     cutoff_hz: float, line_false_alarm: float,
 ) -> _Spectra:
     """Step 6 (003 §1.5): spectra of the gyro rates, star-tracker rates and residuals; residual lines
@@ -477,7 +340,7 @@ class _Quality:
     ci95: NDArray
 
 
-def _quality(inp: _Inputs, res: _Residuals, sigma: NDArray, lines: tuple[SpectralLine, ...]) -> _Quality:
+def _quality(inp: _Inputs, res: Residuals, sigma: NDArray, lines: tuple[SpectralLine, ...]) -> _Quality:
     """Step 3b (processing.star_tracker.whiteness) on the corrected residuals of the accepted samples,
     star-tracker residual lines left out of the test band."""
     series = []
@@ -545,10 +408,12 @@ def analyze_star_tracker_accuracy(
             notes.append("gyro data do not cover the star-tracker segments densely enough: not used")
     report(0.5, "gyro lines")
     motion = gyro.motion_S if gyro is not None else tuple(np.zeros((s.sl.stop - s.sl.start, 3)) for s in segments)
-    corrected = tuple(_correct(seg, m) for seg, m in zip(segments, motion, strict=True))
+    corrected = tuple(correct_segment(seg, m) for seg, m in zip(segments, motion, strict=True))
     report(0.6, "corrected smoothing")
-    res = _residuals(inp.t_ns.size, corrected)  # 3-4
-    sig = _sigmas(res, gyro is not None)
+    res = pool_residuals(inp.t_ns.size, corrected)  # 3-4
+    if res.dof_cor <= 0:
+        raise StarTrackerAccuracyError("no residual degrees of freedom: fewer harmonics are needed")
+    sig = pooled_sigmas(res, gyro is not None)
     w_B = res.w_S @ inp.dcm_BS.T
     if gyro is None:
         notes.append("no gyro data: the residual std includes any real motion the series cannot follow")

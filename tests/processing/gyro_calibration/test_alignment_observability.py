@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from processing.attitude import rotations
-from processing.gyro_calibration.alignment import RateNoise, estimate_alignment, star_tracker_window_rates
+from processing.gyro_calibration.alignment import RateNoise, estimate_alignment
 from processing.gyro_calibration.observability import (
     analyse_information,
     noise_floor,
@@ -13,6 +13,7 @@ from processing.gyro_calibration.observability import (
     parameter_jacobian,
     truncated_inverse,
 )
+from processing.gyro_calibration.window_rates import star_tracker_window_rates
 
 ARCSEC_RAD = np.pi / 648000.0
 DEG_RAD = np.pi / 180.0

@@ -5,10 +5,10 @@ import numpy as np
 import pytest
 
 from processing.attitude import rotations
-from processing.gyro_calibration.alignment import (
+from processing.gyro_calibration.alignment import estimate_alignment
+from processing.gyro_calibration.window_rates import (
     AlignmentError,
     alignment_windows,
-    estimate_alignment,
     star_tracker_window_rates,
 )
 

@@ -10,7 +10,8 @@ from scipy.linalg import expm
 from processing.attitude import rotations
 from processing.attitude.rigid_body import INERTIA_004_KG_M2, RigidBody004, q_OB_from_roll_pitch_yaw_004
 from processing.estimation.consistency import chi_square_stats, nees, whiteness
-from processing.gyroless.ekf import FilterTuning, GyrolessEKF, _dcm_v_dq
+from processing.gyroless.ekf import FilterTuning
+from processing.gyroless.ekf004 import GyrolessEKF, dcm_v_dq
 from processing.gyroless.filtering import (
     GyrolessInputs,
     attitude_errors_rad,
@@ -37,7 +38,7 @@ def test_dcm_v_dq_is_the_derivative() -> None:
         return (qq[0] ** 2 - u @ u) * v + 2 * (u @ v) * u - 2 * qq[0] * np.cross(u, v)
 
     num = np.column_stack([(f(q + e) - f(q - e)) / 2e-6 for e in np.eye(4) * 1e-6])
-    np.testing.assert_allclose(np.array(_dcm_v_dq(tuple(q), tuple(v))), num, atol=1e-8)
+    np.testing.assert_allclose(np.array(dcm_v_dq(tuple(q), tuple(v))), num, atol=1e-8)
     qn = q / np.linalg.norm(q)
     np.testing.assert_allclose(f(qn), rotations.quat_rotate(rotations.quat_conjugate(qn), v), atol=1e-14)
 

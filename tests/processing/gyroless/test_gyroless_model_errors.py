@@ -10,8 +10,10 @@ import pytest
 from processing.attitude import rotations
 from processing.attitude.rigid_body import INERTIA_004_KG_M2, dcm_BO_columns
 from processing.estimation.consistency import ljung_box
-from processing.gyroless.ekf import GyrolessEKF, ModelErrorStates, tangent_basis
-from processing.gyroless.estimation import GyrolessSettings, estimate_gyroless_attitude, filter_consistency
+from processing.gyroless.consistency_gates import filter_consistency
+from processing.gyroless.ekf import ModelErrorStates, tangent_basis
+from processing.gyroless.ekf004 import GyrolessEKF
+from processing.gyroless.estimation import GyrolessSettings, estimate_gyroless_attitude
 from processing.gyroless.filtering import attitude_errors_rad
 from processing.gyroless.mekf import GyrolessMEKF
 from processing.simulate.seed004 import simulate_seed004

@@ -20,12 +20,11 @@ from processing.simulate.seed000 import simulate_seed000
 from processing.simulate.seed003 import Scenario003, simulate_seed003
 from processing.star_tracker.plausibility import (
     CONSISTENCY_MAX,
-    CONVENTIONS,
     PlausibilityError,
     PlausibilityResult,
-    apply_convention,
     check_star_tracker_gyro,
 )
+from processing.star_tracker.plausibility_fit import CONVENTIONS, apply_convention
 from processing.units import NS_PER_S, RAD_PER_ARCSEC, RAD_PER_DEG
 
 T0_NS = 1_900_000_000 * NS_PER_S
