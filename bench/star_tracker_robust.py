@@ -38,19 +38,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from processing.simulate.seed003 import simulate_seed003  # noqa: E402
 from processing.star_tracker.accuracy import analyze_star_tracker_accuracy  # noqa: E402
 from processing.units import RAD_PER_ARCSEC  # noqa: E402
+from tests.processing.star_tracker.test_star_tracker_robust import analyze  # noqa: E402  (the tests' call)
 
 START = 1_259_661_600 * 1_000_000_000
 TRUTH = np.array([2.5, 5.0, 15.0]) * RAD_PER_ARCSEC
 CALM = (0.0, 0.0, 0.0)
-
-
-def analyze(sc, gyro: bool, **kwargs):
-    st, g = sc.streams["star_tracker"], sc.streams["gyro"]
-    q = np.column_stack([st[f"q{i}"] for i in range(4)])
-    extra = {}
-    if gyro:
-        extra = {"gyro_time_tai_ns": g["time_tai_ns"], "w_G_rad_s": np.column_stack([g["wx"], g["wy"], g["wz"]])}
-    return analyze_star_tracker_accuracy(st["time_tai_ns"], q, sc.truth.q_BS, **extra, **kwargs)
 
 
 def quiet(seed: int, **kwargs):
