@@ -68,10 +68,10 @@ def reference_h(reference: Columns, frame: str, t_ns: NDArray[np.int64], model: 
 
 def screen_time_tags(col: Collector, t: NDArray[np.int64], r: NDArray[np.float64], v: NDArray[np.float64],
                      rows: NDArray[np.int64], p: ScreeningParams, findings: dict[str, Any] | None) -> NDArray[np.bool_]:
-    """The ``time_tag`` criterion (processing.orbits.gnss_orbit.time_tag_check): states whose position and
+    """The ``time_tag`` criterion (processing.orbits.gnss_checks.time_tag_check): states whose position and
     velocity residuals against a robust local orbit are both those of a time shift tau, |tau| beyond
     k_time_tag x dr / |v|. Returns the flagged rows (n,) and adds the estimated offsets to ``findings``."""
-    from processing.orbits.gnss_orbit import time_tag_check
+    from processing.orbits.gnss_checks import time_tag_check
 
     dr, dv = p.gnss_position_error_m, p.gnss_velocity_error_m_s
     chk = time_tag_check(t, r, v, position_sigma_m=dr, velocity_sigma_m_s=dv, k=p.k_time_tag)

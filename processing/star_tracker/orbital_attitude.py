@@ -45,13 +45,11 @@ from numpy.typing import ArrayLike, NDArray
 from processing.attitude import rotations
 from processing.frames.earth_orientation import EarthOrientation, canonical_inertial_frame, inertial_to_gcrs_mat
 from processing.frames.orbital import q_IO_003, q_IO_lvlh_004
+from processing.orbits.gnss_checks import GNSS_RMS_RATIO_MAX, GnssFitCheck, check_gnss_fit
 from processing.orbits.gnss_orbit import (
-    GNSS_RMS_RATIO_MAX,
     EopSource,
     GnssFit,
-    GnssFitCheck,
     ascending_nodes,
-    check_gnss_fit,
     fit_gnss,
     gnss_to_gcrs,
     time_since_ascending_node_s,
@@ -366,7 +364,7 @@ def orbital_attitude(
     Star-tracker samples outside the GNSS arcs are dropped (listed in ``dropped_tai_ns``).
     euler_sequence: of the reported angles (EULER_SEQUENCES). segment_at_manoeuvres: smoothing segments
     start and end at the manoeuvres found in q_OS (:func:`detect_manoeuvres`). The GNSS fit is judged
-    against the receiver noise (given, or estimated from the samples: processing.orbits.gnss_orbit
+    against the receiver noise (given, or estimated from the samples: processing.orbits.gnss_checks
     .check_gnss_fit); its error passes into ``orbit_frame_sigma_rad``. drop_late_gnss_tags: when the check
     finds states whose residuals are a time shift (late tags), the orbit is fitted again without them
     (``gnss_check`` keeps the first check, ``gnss_dropped_late`` counts them, ``gnss_recheck`` judges the refit).
