@@ -324,10 +324,8 @@ def orbital_attitude(
     (``gnss_check`` keeps the first check, ``gnss_dropped_late`` counts them, ``gnss_recheck`` judges the refit).
     """
     report = progress or (lambda f, s: None)
-    t, q, frame, q_BS_arr = _checked_inputs(time_tai_ns, q_XS, q_BS, inertial_frame, orbital_frame, smoothing_frame)
-    if euler_sequence not in EULER_SEQUENCES:
-        raise OrbitalAttitudeError(f"euler_sequence must be one of {', '.join(EULER_SEQUENCES)}, "
-                                   f"got {euler_sequence!r}")
+    t, q, frame, q_BS_arr = _checked_inputs(time_tai_ns, q_XS, q_BS, inertial_frame, orbital_frame, smoothing_frame,
+                                            euler_sequence)
     report(0.1, "GNSS orbit fit")
     fit, gnss_check, recheck, n_late = _checked_gnss_fit(
         gnss_time_tai_ns, r_E, v_E, method=gnss_method, position_sigma_m=gnss_position_sigma_m,
@@ -420,7 +418,7 @@ def _attitude_sigma(segments: tuple[SmoothingSegment, ...], q_BS: NDArray, n: in
 
 def _checked_inputs(
     time_tai_ns: ArrayLike, q_XS: ArrayLike, q_BS: ArrayLike, inertial_frame: str, orbital_frame: str,
-    smoothing_frame: str,
+    smoothing_frame: str, euler_sequence: str,
 ) -> tuple[NDArray, NDArray, str, NDArray]:
     """(times (N,) int64, q_XS (N, 4), the canonical inertial frame name, unit q_BS) after the checks."""
     t = np.asarray(time_tai_ns, dtype=np.int64)
@@ -436,6 +434,9 @@ def _checked_inputs(
         raise OrbitalAttitudeError(f"orbital_frame must be one of {', '.join(ORBITAL_FRAMES)}, got {orbital_frame!r}")
     if smoothing_frame not in ("orbital", "inertial"):
         raise OrbitalAttitudeError(f"smoothing_frame must be 'orbital' or 'inertial', got {smoothing_frame!r}")
+    if euler_sequence not in EULER_SEQUENCES:
+        raise OrbitalAttitudeError(f"euler_sequence must be one of {', '.join(EULER_SEQUENCES)}, "
+                                   f"got {euler_sequence!r}")
     return t, q, frame, rotations.quat_normalize(np.asarray(q_BS, dtype=np.float64))
 
 
