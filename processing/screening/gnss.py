@@ -68,10 +68,10 @@ def reference_h(reference: Columns, frame: str, t_ns: NDArray[np.int64], model: 
 
 def screen_time_tags(col: Collector, t: NDArray[np.int64], r: NDArray[np.float64], v: NDArray[np.float64],
                      rows: NDArray[np.int64], p: ScreeningParams, findings: dict[str, Any] | None) -> NDArray[np.bool_]:
-    """The ``time_tag`` criterion (processing.orbits.gnss_orbit.time_tag_check): states whose position and
+    """The ``time_tag`` criterion (processing.orbits.gnss_checks.time_tag_check): states whose position and
     velocity residuals against a robust local orbit are both those of a time shift tau, |tau| beyond
     k_time_tag x dr / |v|. Returns the flagged rows (n,) and adds the estimated offsets to ``findings``."""
-    from processing.orbits.gnss_orbit import time_tag_check
+    from processing.orbits.gnss_checks import time_tag_check
 
     dr, dv = p.gnss_position_error_m, p.gnss_velocity_error_m_s
     chk = time_tag_check(t, r, v, position_sigma_m=dr, velocity_sigma_m_s=dv, k=p.k_time_tag)
@@ -89,6 +89,35 @@ def screen_time_tags(col: Collector, t: NDArray[np.int64], r: NDArray[np.float64
             "offset_s_min": float(np.min(tau)), "offset_s_max": float(np.max(tau)),
             "first_tai_ns": int(t[flagged][0]), "last_tai_ns": int(t[flagged][-1])})
     return flagged
+
+
+def screen_orbit_plane(col: Collector, t: NDArray[np.int64], r: NDArray[np.float64], v: NDArray[np.float64],
+                       dt: NDArray[np.float64], rows: NDArray[np.int64], p: ScreeningParams,
+                       bad: NDArray[np.bool_]) -> NDArray[np.bool_]:
+    """The ``orbit_plane`` criterion of :func:`screen_gnss`: the orbit normal's angle to its rolling median
+    (samples already ``bad`` excluded) beyond k_plane x its noise plus the J2 wobble. Returns the flagged rows."""
+    dr, dv = p.gnss_position_error_m, p.gnss_velocity_error_m_s
+    vi = inertial_velocity_E(r, v)
+    nrm = np.cross(r, vi)
+    nrm = nrm / np.linalg.norm(nrm, axis=1, keepdims=True)
+    # Undo the Earth's rotation (about z, from the first sample) so that the normal is nearly fixed
+    # and a one-sided window (next to rejected samples) does not bias the median.
+    theta = OMEGA_EARTH_RAD_S * (t - t[0]) / NS_PER_S
+    ct, st_ = np.cos(theta), np.sin(theta)
+    nrm = np.stack([ct * nrm[:, 0] - st_ * nrm[:, 1], st_ * nrm[:, 0] + ct * nrm[:, 1], nrm[:, 2]], axis=1)
+    period_s = float(np.median(dt)) if dt.size else 1.0
+    hw = max(2, int(round(p.plane_window_s / max(period_s, 1e-9))))
+    med = rolling_median(nrm, hw, exclude=bad)
+    med = med / np.linalg.norm(med, axis=1, keepdims=True)
+    ang = np.arccos(np.clip(np.sum(nrm * med, axis=1), -1.0, 1.0))
+    rn = np.linalg.norm(r, axis=1)
+    # noise, plus the J2_EARTH wobble of the normal (rate < 3 J2_EARTH (R/r)^2 n) over half the window, which a
+    # one-sided window (next to rejected samples or at the ends) turns into a bias
+    wobble = 3.0 * J2_EARTH * (R_EARTH_M / rn) ** 2 * np.sqrt(MU_EARTH_M3_S2 / rn**3) * 0.5 * hw * period_s
+    tol_plane = p.k_plane * (dv / np.linalg.norm(vi, axis=1) + dr / rn) + wobble
+    applied = np.isfinite(ang)
+    col.add("orbit_plane", rows, ang > tol_plane, ang, float(np.nanmedian(tol_plane)), "rad", "generic", applied)
+    return applied & (ang > tol_plane)
 
 
 def screen_gnss(col: Collector, cols: Columns, p: ScreeningParams, reference: Columns | None,
@@ -134,28 +163,7 @@ def screen_gnss(col: Collector, cols: Columns, p: ScreeningParams, reference: Co
         applied = np.isfinite(dev)
         col.add("energy", rows, dev > tol, dev, float(np.nanmedian(tol)), "m^2/s^2", "002 eq. 15", applied)
         bad |= applied & (dev > tol)
-        # Orbit plane.
-        vi = inertial_velocity_E(r, v)
-        nrm = np.cross(r, vi)
-        nrm = nrm / np.linalg.norm(nrm, axis=1, keepdims=True)
-        # Undo the Earth's rotation (about z, from the first sample) so that the normal is nearly fixed
-        # and a one-sided window (next to rejected samples) does not bias the median.
-        theta = OMEGA_EARTH_RAD_S * (t - t[0]) / NS_PER_S
-        ct, st_ = np.cos(theta), np.sin(theta)
-        nrm = np.stack([ct * nrm[:, 0] - st_ * nrm[:, 1], st_ * nrm[:, 0] + ct * nrm[:, 1], nrm[:, 2]], axis=1)
-        period_s = float(np.median(dt)) if dt.size else 1.0
-        hw = max(2, int(round(p.plane_window_s / max(period_s, 1e-9))))
-        med = rolling_median(nrm, hw, exclude=bad)
-        med = med / np.linalg.norm(med, axis=1, keepdims=True)
-        ang = np.arccos(np.clip(np.sum(nrm * med, axis=1), -1.0, 1.0))
-        rn = np.linalg.norm(r, axis=1)
-        # noise, plus the J2_EARTH wobble of the normal (rate < 3 J2_EARTH (R/r)^2 n) over half the window, which a
-        # one-sided window (next to rejected samples or at the ends) turns into a bias
-        wobble = 3.0 * J2_EARTH * (R_EARTH_M / rn) ** 2 * np.sqrt(MU_EARTH_M3_S2 / rn**3) * 0.5 * hw * period_s
-        tol_plane = p.k_plane * (dv / np.linalg.norm(vi, axis=1) + dr / rn) + wobble
-        applied = np.isfinite(ang)
-        col.add("orbit_plane", rows, ang > tol_plane, ang, float(np.nanmedian(tol_plane)), "rad", "generic", applied)
-        bad |= applied & (ang > tol_plane)
+        bad |= screen_orbit_plane(col, t, r, v, dt, rows, p, bad)
         # Velocity against the local slope of the positions.
         v_fit, gain, cubic_gain = local_velocity_fit(t, r, p.velocity_half_window, exclude=bad)
         dvv = np.linalg.norm(v - v_fit, axis=1)

@@ -26,7 +26,9 @@ exact (the kinematics hold to rounding). Deterministic per ``seed``; pure; no I/
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -42,6 +44,7 @@ from processing.simulate.seed003 import (
     ST_NOISE_STD_003_RAD,
     ST_SENSOR,
     Seed003ParameterError,
+    _seconds,
     _series,
     mounting_q_BS_003,
 )
@@ -196,6 +199,85 @@ def dropout_mask(t_ns: NDArray, probability: float, n_long: int, long_max_s: flo
     return keep, np.asarray(gaps, dtype=np.int64).reshape(-1, 2)
 
 
+def _base_model(altitude_m: float, att: Generator) -> OrbitalAttitudeModel:
+    """The station-like orbit (sun-synchronous inclination) and slowly varying orbital attitude of
+    :func:`simulate_realistic` (its sine series drawn from ``att``)."""
+    a_m = R_EARTH_M + altitude_m
+    return OrbitalAttitudeModel(
+        a_m=a_m, inc_rad=float(sun_synchronous_inclination_rad(a_m)), raan_rad=100.0 * RAD_PER_DEG,
+        u0_rad=20.0 * RAD_PER_DEG,
+        pitch=_series(0.0, 0.3 * RAD_PER_DEG, 3.0 * RAD_PER_ARCSEC, 0.4, att),
+        yaw=_series(1.2 * RAD_PER_DEG, 0.25 * RAD_PER_DEG, 3.0 * RAD_PER_ARCSEC, 0.4, att),
+        roll=_series(0.0, 0.3 * RAD_PER_DEG, 3.0 * RAD_PER_ARCSEC, 0.4, att))
+
+
+def _check_realistic(jitter_fraction: float, dropout_probability: float, duration_s: float,
+                     periods_s: tuple[float, float, float]) -> None:
+    """The parameter domains of :func:`simulate_realistic` (Seed003ParameterError naming the parameter)."""
+    if not (0.0 <= jitter_fraction < 0.5):
+        raise Seed003ParameterError(f"jitter_fraction must be in [0, 0.5), got {jitter_fraction}")
+    if not (0.0 <= dropout_probability < 0.5):
+        raise Seed003ParameterError(f"dropout_probability must be in [0, 0.5), got {dropout_probability}")
+    if duration_s <= 0 or min(periods_s) <= 0:
+        raise Seed003ParameterError("duration and periods must be > 0")
+
+
+def _star_tracker_q(q_IB: NDArray, q_BS: NDArray, rng: Generator, noise_std_rad: tuple[float, float, float],
+                    lsb: float) -> tuple[NDArray, NDArray]:
+    """(true q_IS, measured q_IS): the true one turned by white noise (per sensor axis), quantised to ``lsb``."""
+    q_IS_true = rotations.quat_canonical(rotations.quat_multiply(q_IB, q_BS))
+    noise = rng.standard_normal((q_IB.shape[0], 3)) * np.asarray(noise_std_rad)
+    q_IS = rotations.quat_canonical(rotations.quat_multiply(q_IS_true, rotations.rotvec_to_quat(noise)))
+    return q_IS_true, quantise(q_IS, lsb)
+
+
+def _late_tags(t_n: NDArray, start_tai_ns: int, duration_s: float, rng: Generator, n_blocks: int, block_s: float,
+               late_tag_s: float) -> tuple[NDArray, NDArray]:
+    """(late (K,), true fix times (K,)): ``n_blocks`` blocks of ``block_s`` at random starts whose states are those
+    of tag - late_tag_s."""
+    late = np.zeros(t_n.size, dtype=bool)
+    for a in rng.uniform(0.1, 0.9, n_blocks) * duration_s:
+        t0 = np.int64(start_tai_ns) + int(a * NS_PER_S)
+        late |= (t_n >= t0) & (t_n < t0 + int(block_s * NS_PER_S))
+    return late, t_n - np.where(late, int(round(late_tag_s * NS_PER_S)), 0)
+
+
+def _manoeuvre_tai_ns(man: YawManoeuvre | None, start_tai_ns: int) -> tuple[int, int] | None:
+    """(start, end) tai_ns of the manoeuvre, None without one."""
+    man_ns = None if man is None else tuple(int(np.int64(start_tai_ns) + round(x * NS_PER_S))
+                                            for x in man.interval_s())
+    return None if man_ns is None else (man_ns[0], man_ns[1])
+
+
+def _gnss_states(model: ManoeuvreModel, secs: Callable[[NDArray], NDArray], t_n: NDArray, t_true: NDArray,
+                 rng_r: Generator, rng_v: Generator, noise_std: tuple[float, float], lsb: tuple[float, float]
+                 ) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+    """(r_E, v_E) true ITRF states at the tags t_n and the measured (r, v): the states of the fix times t_true
+    (late tags) plus noise (position, velocity std), quantised to ``lsb``."""
+    eop = EarthOrientation()
+    r_I_true, v_I_true = model.orbit(secs(t_true))
+    r_E_rep, v_E_rep = gcrs_to_itrs_state(r_I_true, v_I_true, t_true, eop)  # Earth-fixed state of the fix time
+    r_I_tag, v_I_tag = model.orbit(secs(t_n))
+    r_E, v_E = gcrs_to_itrs_state(r_I_tag, v_I_tag, t_n, eop)
+    r_meas = quantise(r_E_rep + rng_r.standard_normal(r_E.shape) * noise_std[0], lsb[0])
+    v_meas = quantise(v_E_rep + rng_v.standard_normal(v_E.shape) * noise_std[1], lsb[1])
+    return r_E, v_E, r_meas, v_meas
+
+
+def _streams(t_st: NDArray, q_IS: NDArray, t_g: NDArray, w_G: NDArray, t_n: NDArray, r_meas: NDArray,
+             v_meas: NDArray) -> dict[str, dict[str, NDArray]]:
+    """The telemetry streams (column dicts) of :func:`simulate_realistic`."""
+    return {
+        "star_tracker": {"time_tai_ns": t_st, **{f"q{i}": q_IS[:, i].copy() for i in range(4)},
+                         "sensor": np.full(t_st.size, ST_SENSOR, dtype=object)},
+        "gyro": {"time_tai_ns": t_g, **{c: w_G[:, i].copy() for i, c in enumerate(("wx", "wy", "wz"))},
+                 "sensor": np.full(t_g.size, "gyro", dtype=object)},
+        "gnss": {"time_tai_ns": t_n, **{c: r_meas[:, i].copy() for i, c in enumerate(("x", "y", "z"))},
+                 **{c: v_meas[:, i].copy() for i, c in enumerate(("vx", "vy", "vz"))},
+                 "sensor": np.full(t_n.size, "gnss", dtype=object)},
+    }
+
+
 def simulate_realistic(
     *,
     start_tai_ns: int,
@@ -231,40 +313,22 @@ def simulate_realistic(
     manoeuvre; n_late_blocks 0: no late tags; lsb 0: no quantisation; jitter_fraction 0: regular grid.
     """
     parameters = {k: v for k, v in locals().items() if k != "parameters"}
-    if not (0.0 <= jitter_fraction < 0.5):
-        raise Seed003ParameterError(f"jitter_fraction must be in [0, 0.5), got {jitter_fraction}")
-    if not (0.0 <= dropout_probability < 0.5):
-        raise Seed003ParameterError(f"dropout_probability must be in [0, 0.5), got {dropout_probability}")
-    if duration_s <= 0 or min(st_period_s, gyro_period_s, gnss_period_s) <= 0:
-        raise Seed003ParameterError("duration and periods must be > 0")
+    _check_realistic(jitter_fraction, dropout_probability, duration_s, (st_period_s, gyro_period_s, gnss_period_s))
     rngs = [Generator(PCG64(s)) for s in SeedSequence(seed).spawn(12)]
-    a_m = R_EARTH_M + altitude_m
-    att = rngs[0]
-    base = OrbitalAttitudeModel(
-        a_m=a_m, inc_rad=float(sun_synchronous_inclination_rad(a_m)), raan_rad=100.0 * RAD_PER_DEG,
-        u0_rad=20.0 * RAD_PER_DEG,
-        pitch=_series(0.0, 0.3 * RAD_PER_DEG, 3.0 * RAD_PER_ARCSEC, 0.4, att),
-        yaw=_series(1.2 * RAD_PER_DEG, 0.25 * RAD_PER_DEG, 3.0 * RAD_PER_ARCSEC, 0.4, att),
-        roll=_series(0.0, 0.3 * RAD_PER_DEG, 3.0 * RAD_PER_ARCSEC, 0.4, att))
+    base = _base_model(altitude_m, rngs[0])
     man = None if manoeuvre_start_s is None else YawManoeuvre(manoeuvre_start_s, manoeuvre_duration_s,
                                                              manoeuvre_angle_rad)
     model = ManoeuvreModel(base, man)
     q_BS = mounting_q_BS_003()
     q_BG = np.array([1.0, 0.0, 0.0, 0.0])
-
-    def secs(t: NDArray) -> NDArray:
-        return (t - np.int64(start_tai_ns)).astype(np.float64) / NS_PER_S
-
+    secs = partial(_seconds, start_tai_ns=start_tai_ns)
     long_gaps: dict[str, NDArray] = {}
     # star tracker
     t_st = irregular_times(start_tai_ns, duration_s, st_period_s, jitter_fraction, rngs[1])
     keep, long_gaps["star_tracker"] = dropout_mask(t_st, dropout_probability, n_long_gaps, long_gap_max_s, rngs[2])
     t_st = t_st[keep]
     s_st = model.evaluate(secs(t_st))
-    q_IS_true = rotations.quat_canonical(rotations.quat_multiply(s_st.q_IB, q_BS))
-    noise = rngs[3].standard_normal((t_st.size, 3)) * np.asarray(st_noise_std_rad)
-    q_IS = rotations.quat_canonical(rotations.quat_multiply(q_IS_true, rotations.rotvec_to_quat(noise)))
-    q_IS = quantise(q_IS, quaternion_lsb)
+    q_IS_true, q_IS = _star_tracker_q(s_st.q_IB, q_BS, rngs[3], st_noise_std_rad, quaternion_lsb)
     # gyro
     t_g = irregular_times(start_tai_ns, duration_s, gyro_period_s, jitter_fraction, rngs[4])
     keep, long_gaps["gyro"] = dropout_mask(t_g, dropout_probability, n_long_gaps, long_gap_max_s, rngs[5])
@@ -276,37 +340,18 @@ def simulate_realistic(
     t_n = irregular_times(start_tai_ns, duration_s, gnss_period_s, jitter_fraction, rngs[7])
     keep, long_gaps["gnss"] = dropout_mask(t_n, dropout_probability, 0, long_gap_max_s, rngs[8])
     t_n = t_n[keep]
-    late = np.zeros(t_n.size, dtype=bool)
-    for a in rngs[9].uniform(0.1, 0.9, n_late_blocks) * duration_s:
-        t0 = np.int64(start_tai_ns) + int(a * NS_PER_S)
-        late |= (t_n >= t0) & (t_n < t0 + int(late_block_s * NS_PER_S))
-    t_true = t_n - np.where(late, int(round(late_tag_s * NS_PER_S)), 0)
-    eop = EarthOrientation()
-    r_I_true, v_I_true = model.orbit(secs(t_true))
-    r_E_rep, v_E_rep = gcrs_to_itrs_state(r_I_true, v_I_true, t_true, eop)  # Earth-fixed state of the fix time
-    r_I_tag, v_I_tag = model.orbit(secs(t_n))
-    r_E, v_E = gcrs_to_itrs_state(r_I_tag, v_I_tag, t_n, eop)
-    r_meas = quantise(r_E_rep + rngs[10].standard_normal(r_E.shape) * gnss_position_noise_std_m, gnss_position_lsb_m)
-    v_meas = quantise(v_E_rep + rngs[11].standard_normal(v_E.shape) * gnss_velocity_noise_std_m_s,
-                      gnss_velocity_lsb_m_s)
-    streams = {
-        "star_tracker": {"time_tai_ns": t_st, **{f"q{i}": q_IS[:, i].copy() for i in range(4)},
-                         "sensor": np.full(t_st.size, ST_SENSOR, dtype=object)},
-        "gyro": {"time_tai_ns": t_g, **{c: w_G[:, i].copy() for i, c in enumerate(("wx", "wy", "wz"))},
-                 "sensor": np.full(t_g.size, "gyro", dtype=object)},
-        "gnss": {"time_tai_ns": t_n, **{c: r_meas[:, i].copy() for i, c in enumerate(("x", "y", "z"))},
-                 **{c: v_meas[:, i].copy() for i, c in enumerate(("vx", "vy", "vz"))},
-                 "sensor": np.full(t_n.size, "gnss", dtype=object)},
-    }
+    late, t_true = _late_tags(t_n, start_tai_ns, duration_s, rngs[9], n_late_blocks, late_block_s, late_tag_s)
+    r_E, v_E, r_meas, v_meas = _gnss_states(
+        model, secs, t_n, t_true, rngs[10], rngs[11], (gnss_position_noise_std_m, gnss_velocity_noise_std_m_s),
+        (gnss_position_lsb_m, gnss_velocity_lsb_m_s))
+    streams = _streams(t_st, q_IS, t_g, w_G, t_n, r_meas, v_meas)
     config = {"star_trackers": {ST_SENSOR: {"q_BS": q_BS.tolist()}}, "gyro": {"q_BG": q_BG.tolist()}}
-    man_ns = None if man is None else tuple(int(np.int64(start_tai_ns) + round(x * NS_PER_S))
-                                            for x in man.interval_s())
     truth = RealisticTruth(
         model=model, start_tai_ns=int(start_tai_ns), q_BS=q_BS, q_BG=q_BG, st_time_tai_ns=t_st, st_q_OB=s_st.q_OB,
         st_q_IB=s_st.q_IB, st_q_IS=q_IS_true, gyro_time_tai_ns=t_g, gyro_w_B=s_g.w_B,
         gyro_bias_rad_s=np.asarray(gyro_bias_rad_s, dtype=float), gnss_time_tai_ns=t_n, gnss_true_time_tai_ns=t_true,
         gnss_late=late, r_E=r_E, v_E=v_E, late_tag_s=late_tag_s,
-        manoeuvre_tai_ns=None if man_ns is None else (man_ns[0], man_ns[1]),
+        manoeuvre_tai_ns=_manoeuvre_tai_ns(man, start_tai_ns),
         lsb={"quaternion": quaternion_lsb, "gyro_rad_s": gyro_lsb_rad_s, "gnss_position_m": gnss_position_lsb_m,
              "gnss_velocity_m_s": gnss_velocity_lsb_m_s},
         long_gaps_tai_ns=long_gaps,

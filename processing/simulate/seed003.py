@@ -275,7 +275,21 @@ def simulate_seed003(
                  gnss_velocity_noise_std_m_s, rng_gnss)
     streams = {"star_tracker": st.columns(), "gyro": gyro.columns(), "gnss": gnss.columns()}
     config = {"star_trackers": {ST_SENSOR: {"q_BS": q_BS.tolist()}}, "gyro": {"q_BG": gyro.q_BG.tolist()}}
-    truth = Truth003(
+    truth = _truth(model, start_tai_ns, a_m, alpha_rad, q_BS, st, gyro, gnss, gyro_bias_rad_s=gyro_bias_rad_s,
+                   gyro_bias_drift_rad_s2=gyro_bias_drift_rad_s2, gyro_noise_std_rad_s=gyro_noise_std_rad_s,
+                   st_noise_std_rad=st_noise_std_rad, st_noise_tau_s=st_noise_tau_s,
+                   gnss_noise_std=(gnss_position_noise_std_m, gnss_velocity_noise_std_m_s))
+    return Scenario003(streams=streams, config=config, truth=truth, parameters=parameters)
+
+
+def _truth(model: OrbitalAttitudeModel, start_tai_ns: int, a_m: float, alpha_rad: float, q_BS: NDArray,
+           st: _StarTracker, gyro: _Gyro, gnss: _Gnss, *, gyro_bias_rad_s: tuple[float, float, float],
+           gyro_bias_drift_rad_s2: tuple[float, float, float], gyro_noise_std_rad_s: float,
+           st_noise_std_rad: tuple[float, float, float], st_noise_tau_s: float | None,
+           gnss_noise_std: tuple[float, float]) -> Truth003:
+    """The :class:`Truth003` of :func:`simulate_seed003` from its model, samples and noise parameters
+    (gnss_noise_std: position [m], velocity [m/s])."""
+    return Truth003(
         model=model, start_tai_ns=int(np.int64(start_tai_ns)), q_BS=q_BS, q_BG=gyro.q_BG, alpha_rad=alpha_rad,
         mean_motion_rad_s=float(mean_motion_rad_s(a_m)), gyro_time_tai_ns=gyro.time_tai_ns,
         q_IB_gyro=gyro.state.q_IB, w_B_gyro=gyro.state.w_B, pitch_rad=gyro.state.pitch_rad,
@@ -287,11 +301,10 @@ def simulate_seed003(
         st_noise_std_rad=np.asarray(st_noise_std_rad, dtype=float), st_nominal_time_tai_ns=st.nominal_tai_ns,
         st_removed_time_tai_ns=st.nominal_tai_ns[~st.keep], st_gap_intervals_tai_ns=st.gap_intervals_tai_ns,
         gnss_time_tai_ns=gnss.time_tai_ns, r_I=gnss.r_I, v_I=gnss.v_I, r_E=gnss.r_E, v_E=gnss.v_E,
-        gnss_position_noise_std_m=gnss_position_noise_std_m, gnss_velocity_noise_std_m_s=gnss_velocity_noise_std_m_s,
+        gnss_position_noise_std_m=gnss_noise_std[0], gnss_velocity_noise_std_m_s=gnss_noise_std[1],
         eop=gnss.eop, st_outlier_mask=st.outlier_mask, st_outlier_rotvec_S=st.outlier_S,
         st_noise_tau_s=st_noise_tau_s, gyro_line_rad_s=gyro.line_rad_s,
     )
-    return Scenario003(streams=streams, config=config, truth=truth, parameters=parameters)
 
 
 def _check_parameters(p: dict[str, Any]) -> None:

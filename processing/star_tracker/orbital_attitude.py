@@ -31,6 +31,9 @@ Here, with the modern equivalents:
 5. q_OB = q_OS o q_BS^-1, angles from q_OB; the body attitude q_GB = q_GO o q_OB (for the AEM).
 
 Inputs: times int64 tai_ns; quaternions scalar first, unit; states ITRF m, m/s. Angles rad.
+
+The trend-plus-sines fit of step 4 is in processing.star_tracker.trend_sines; the JSON-able summary and
+segment table of a result (summary_of, segment_table) in processing.star_tracker.orbital_attitude_summary.
 """
 
 from __future__ import annotations
@@ -45,25 +48,23 @@ from numpy.typing import ArrayLike, NDArray
 from processing.attitude import rotations
 from processing.frames.earth_orientation import EarthOrientation, canonical_inertial_frame, inertial_to_gcrs_mat
 from processing.frames.orbital import q_IO_003, q_IO_lvlh_004
+from processing.orbits.gnss_checks import GnssFitCheck, check_gnss_fit
 from processing.orbits.gnss_orbit import (
-    GNSS_RMS_RATIO_MAX,
     EopSource,
     GnssFit,
-    GnssFitCheck,
     ascending_nodes,
-    check_gnss_fit,
     fit_gnss,
     gnss_to_gcrs,
     time_since_ascending_node_s,
 )
-from processing.signal.sine_series import fit_sine_series, select_harmonics, sine_series_design
 from processing.star_tracker.smoothing import (
     mean_quaternion,
     residual_mrps,
     sensor_axis_residuals,
     split_segments,
 )
-from processing.units import ARCSEC_PER_RAD, NS_PER_S
+from processing.star_tracker.trend_sines import fit_trend_sines
+from processing.units import NS_PER_S
 
 ORBITAL_FRAMES = ("orbital_003", "lvlh_004")
 MIN_SMOOTHING_SAMPLES = 12
@@ -243,55 +244,6 @@ def _q_GO(r_I: NDArray, v_I: NDArray, orbital_frame: str) -> NDArray:
     raise OrbitalAttitudeError(f"orbital_frame must be one of {', '.join(ORBITAL_FRAMES)}, got {orbital_frame!r}")
 
 
-def _trend_sines_design(tau: NDArray, trend_degree: int, harmonics: int) -> NDArray:
-    """[P_0(x) .. P_d(x), sin(pi tau) .. sin(pi M tau)] (N, d + 1 + M), x = 2 tau - 1 (Legendre)."""
-    return np.column_stack([np.polynomial.legendre.legvander(2.0 * tau - 1.0, trend_degree),
-                            sine_series_design(tau, harmonics, 0.0, 1.0)[:, 2:]])
-
-
-def fit_trend_sines(t_s: NDArray, y: NDArray, *, trend_degree: int = 3, harmonics: int | None = None,
-                    max_harmonics: int | None = None) -> tuple[NDArray, int]:
-    """Least-squares fit of a degree-d polynomial trend plus the 003 §1.3 sine series to y (N,).
-
-    t_s (N,) [s] increasing; tau = (t - t1)/T. With d = 1 this is 003's a_{M+1} + a_{M+2}(t - t1) +
-    sum a_m sin(pi m tau) (then processing.signal.sine_series does the fit). Why d = 3 is the default for
-    attitude: integrating by parts, the sine coefficients of the detrended signal g are
-    b_m = 2/(m pi) [g(0) - (-1)^m g(T)] - 2 T^2/(m pi)^3 [g''(0) - (-1)^m g''(T)] + O(m^-5); a linear
-    trend removes the first term only, so a slow motion that does not start and end with zero
-    curvature needs ~25-30 harmonics to be followed to 1 arcsec, each passing on noise; a cubic trend
-    also absorbs the end curvature (coefficients ~m^-5) and ~15 harmonics do (seed-003 simulator:
-    pitch error 3.9-4.5" instead of 4.3-5.8", harmonics 12-19 instead of 18-38). M by generalised
-    cross-validation over 0..max_harmonics (default (N - 2)/4) from one Householder QR of the widest
-    design (the columns are nested). Returns (fitted values (N,), M).
-    """
-    n = t_s.size
-    tau = (t_s - t_s[0]) / (t_s[-1] - t_s[0])
-    if trend_degree == 1:
-        cap = max(0, (n - 2) // 4) if max_harmonics is None else max_harmonics
-        m = harmonics if harmonics is not None else select_harmonics(t_s, y, cap, criterion="gcv")[0]
-        m = int(min(m, n - 3))
-        return fit_sine_series(t_s, y, m).fitted, m
-    base = trend_degree + 1
-    cap = max(0, min((n - 2) // 4 if max_harmonics is None else max_harmonics, n - base - 1))
-    top = cap if harmonics is None else int(min(harmonics, n - base - 1))
-    a = _trend_sines_design(tau, trend_degree, top)
-    q, r = np.linalg.qr(a)
-    proj = q.T @ y
-    if harmonics is None:
-        resid0 = float(np.sum((y - q @ proj) ** 2))
-        tail = np.concatenate([np.cumsum((proj ** 2)[::-1])[::-1], [0.0]])
-        ms = np.arange(cap + 1)
-        n_par = base + ms
-        rss = resid0 + tail[n_par]
-        score = np.where(n > n_par, n * rss / np.maximum(n - n_par, 1) ** 2, np.inf)
-        m = int(ms[int(np.argmin(score))])
-    else:
-        m = top
-    p = base + m
-    coef = np.linalg.solve(r[:p, :p], proj[:p])
-    return a[:, :p] @ coef, m
-
-
 def smooth_attitude(
     time_tai_ns: NDArray, q: NDArray, *, harmonics: int | None = None, trend_degree: int = 3,
     segment_max_s: float = SEGMENT_MAX_S, max_gap_s: float = 60.0, breaks: tuple[int, ...] = (),
@@ -366,29 +318,18 @@ def orbital_attitude(
     Star-tracker samples outside the GNSS arcs are dropped (listed in ``dropped_tai_ns``).
     euler_sequence: of the reported angles (EULER_SEQUENCES). segment_at_manoeuvres: smoothing segments
     start and end at the manoeuvres found in q_OS (:func:`detect_manoeuvres`). The GNSS fit is judged
-    against the receiver noise (given, or estimated from the samples: processing.orbits.gnss_orbit
+    against the receiver noise (given, or estimated from the samples: processing.orbits.gnss_checks
     .check_gnss_fit); its error passes into ``orbit_frame_sigma_rad``. drop_late_gnss_tags: when the check
     finds states whose residuals are a time shift (late tags), the orbit is fitted again without them
     (``gnss_check`` keeps the first check, ``gnss_dropped_late`` counts them, ``gnss_recheck`` judges the refit).
     """
     report = progress or (lambda f, s: None)
-    t, q, frame, q_BS_arr = _checked_inputs(time_tai_ns, q_XS, q_BS, inertial_frame, orbital_frame, smoothing_frame)
-    if euler_sequence not in EULER_SEQUENCES:
-        raise OrbitalAttitudeError(f"euler_sequence must be one of {', '.join(EULER_SEQUENCES)}, "
-                                   f"got {euler_sequence!r}")
+    t, q, frame, q_BS_arr = _checked_inputs(time_tai_ns, q_XS, q_BS, inertial_frame, orbital_frame, smoothing_frame,
+                                            euler_sequence)
     report(0.1, "GNSS orbit fit")
-    fit = fit_gnss(gnss_time_tai_ns, r_E, v_E, method=gnss_method)
-    gnss_check = check_gnss_fit(fit, gnss_time_tai_ns, r_E, v_E, position_sigma_m=gnss_position_sigma_m,
-                                velocity_sigma_m_s=gnss_velocity_sigma_m_s)
-    recheck = None
-    n_late = 0
-    if drop_late_gnss_tags and not gnss_check.consistent and np.any(gnss_check.late_tags):
-        keep = ~gnss_check.late_tags
-        n_late = int(gnss_check.late_tags.sum())
-        tg, rg, vg = (np.asarray(x)[keep] for x in (gnss_time_tai_ns, r_E, v_E))
-        fit = fit_gnss(tg, rg, vg, method=gnss_method)
-        recheck = check_gnss_fit(fit, tg, rg, vg, position_sigma_m=gnss_position_sigma_m,
-                                 velocity_sigma_m_s=gnss_velocity_sigma_m_s)
+    fit, gnss_check, recheck, n_late = _checked_gnss_fit(
+        gnss_time_tai_ns, r_E, v_E, method=gnss_method, position_sigma_m=gnss_position_sigma_m,
+        velocity_sigma_m_s=gnss_velocity_sigma_m_s, drop_late_tags=drop_late_gnss_tags)
     frame_check = recheck or gnss_check
     covered = fit.covered(t)
     if not np.any(covered):
@@ -426,6 +367,27 @@ def orbital_attitude(
     )
 
 
+def _checked_gnss_fit(
+    gnss_time_tai_ns: ArrayLike, r_E: ArrayLike, v_E: ArrayLike, *, method: Literal["chebyshev", "sine"],
+    position_sigma_m: float | None, velocity_sigma_m_s: float | None, drop_late_tags: bool,
+) -> tuple[GnssFit, GnssFitCheck, GnssFitCheck | None, int]:
+    """Step 2's GNSS fit and its check; when the check finds late tags (and ``drop_late_tags``), the fit
+    again without them and its check. Returns (fit used, first check, recheck or None, number dropped)."""
+    fit = fit_gnss(gnss_time_tai_ns, r_E, v_E, method=method)
+    gnss_check = check_gnss_fit(fit, gnss_time_tai_ns, r_E, v_E, position_sigma_m=position_sigma_m,
+                                velocity_sigma_m_s=velocity_sigma_m_s)
+    recheck = None
+    n_late = 0
+    if drop_late_tags and not gnss_check.consistent and np.any(gnss_check.late_tags):
+        keep = ~gnss_check.late_tags
+        n_late = int(gnss_check.late_tags.sum())
+        tg, rg, vg = (np.asarray(x)[keep] for x in (gnss_time_tai_ns, r_E, v_E))
+        fit = fit_gnss(tg, rg, vg, method=method)
+        recheck = check_gnss_fit(fit, tg, rg, vg, position_sigma_m=position_sigma_m,
+                                 velocity_sigma_m_s=velocity_sigma_m_s)
+    return fit, gnss_check, recheck, n_late
+
+
 def _orbit_frame_sigma(chk: GnssFitCheck, r_I: NDArray, v_I: NDArray) -> NDArray:
     """(pitch, yaw, roll) error [rad] of the orbital frame from the GNSS fit's error (per axis) e_r, e_v: the
     radius direction tilts by e_r / r about axes 1 and 2 (roll, pitch), the orbit normal by e_v / v + e_r / r
@@ -456,7 +418,7 @@ def _attitude_sigma(segments: tuple[SmoothingSegment, ...], q_BS: NDArray, n: in
 
 def _checked_inputs(
     time_tai_ns: ArrayLike, q_XS: ArrayLike, q_BS: ArrayLike, inertial_frame: str, orbital_frame: str,
-    smoothing_frame: str,
+    smoothing_frame: str, euler_sequence: str,
 ) -> tuple[NDArray, NDArray, str, NDArray]:
     """(times (N,) int64, q_XS (N, 4), the canonical inertial frame name, unit q_BS) after the checks."""
     t = np.asarray(time_tai_ns, dtype=np.int64)
@@ -472,6 +434,9 @@ def _checked_inputs(
         raise OrbitalAttitudeError(f"orbital_frame must be one of {', '.join(ORBITAL_FRAMES)}, got {orbital_frame!r}")
     if smoothing_frame not in ("orbital", "inertial"):
         raise OrbitalAttitudeError(f"smoothing_frame must be 'orbital' or 'inertial', got {smoothing_frame!r}")
+    if euler_sequence not in EULER_SEQUENCES:
+        raise OrbitalAttitudeError(f"euler_sequence must be one of {', '.join(EULER_SEQUENCES)}, "
+                                   f"got {euler_sequence!r}")
     return t, q, frame, rotations.quat_normalize(np.asarray(q_BS, dtype=np.float64))
 
 
@@ -513,87 +478,3 @@ def _smoothed_q_OS(
         return smooth_attitude(fr.time_tai_ns, fr.q_OS, **options)
     q_GS_sm, segments = smooth_attitude(fr.time_tai_ns, fr.q_GS, **options)
     return rotations.quat_multiply(rotations.quat_conjugate(fr.q_GO), q_GS_sm), segments
-
-
-SUMMARY_LIST_MAX = 10
-"""Lists in the summary keep their first entries (the tables have all)."""
-
-
-def gnss_check_summary(c: GnssFitCheck) -> dict[str, Any]:
-    """JSON-able figures of a GNSS fit check."""
-    return {"consistent": c.consistent, "position_sigma_m": c.position_sigma_m,
-            "velocity_sigma_m_s": c.velocity_sigma_m_s, "noise_source": c.noise_source,
-            "rms_ratio": {"position": c.rms_ratio[0], "velocity": c.rms_ratio[1]}, "ratio_max": GNSS_RMS_RATIO_MAX,
-            "chi2": c.chi2, "dof": c.dof, "p_value": c.p_value, "n_late_tags": int(c.late_tags.sum()),
-            "late_tag_offset_s": c.late_offset_s, "inertial_velocity": c.inertial_velocity, "cause": c.cause,
-            "position_error_m": c.position_error_m, "velocity_error_m_s": c.velocity_error_m_s}
-
-
-def summary_of(result: OrbitalAttitude) -> dict[str, Any]:
-    """JSON-able figures of a result besides the angle statistics: GNSS fit, smoothing, coverage (lists cut to
-    their first SUMMARY_LIST_MAX entries with their counts; :func:`segment_table` has every segment)."""
-    arcsec = ARCSEC_PER_RAD
-    seg = [s for s in result.segments if s.smoothed]
-    w = np.array([s.stop - s.start for s in seg], dtype=float)
-    resid = (np.sqrt(np.sum(w[:, None] * np.stack([s.residual_rms_rad for s in seg]) ** 2, axis=0) / np.sum(w))
-             * arcsec).tolist() if seg else None
-    names = ("pitch", "yaw", "roll")
-    frame_sig = result.orbit_frame_sigma_rad
-    att_sig = result.attitude_sigma_rad
-    out: dict[str, Any] = {
-        "n_samples": int(result.time_tai_ns.size),
-        "n_dropped_outside_gnss": int(result.dropped_tai_ns.size),
-        "euler_sequence": result.euler_sequence,
-        "euler_sequence_description": EULER_SEQUENCES[result.euler_sequence],
-        "gnss_fit": {
-            "method": result.gnss.method,
-            "n_samples": result.gnss.n_samples,
-            "n_arcs": len(result.gnss.arcs),
-            "position_residual_rms_m": result.gnss.position_rms_m.tolist(),
-            "velocity_residual_rms_m_s": result.gnss.velocity_rms_m_s.tolist(),
-            "degree": [a.degree for a in result.gnss.arcs][:SUMMARY_LIST_MAX] if result.gnss.method == "chebyshev"
-            else None,
-            "harmonics": [list(a.harmonics) for a in result.gnss.arcs][:SUMMARY_LIST_MAX]
-            if result.gnss.method == "sine" else None,
-            "check": None if result.gnss_check is None else gnss_check_summary(result.gnss_check),
-            "n_dropped_late_tags": result.gnss_dropped_late,
-            "check_after_dropping": None if result.gnss_recheck is None else gnss_check_summary(result.gnss_recheck),
-        },
-        "orbit_frame_sigma_arcsec": None if frame_sig is None else
-        {n: float(x * arcsec) for n, x in zip(names, frame_sig, strict=True)},
-        "angle_sigma_arcsec": None if frame_sig is None else
-        {n: float(np.hypot(x, 0.0 if att_sig is None else att_sig[i]) * arcsec)
-         for i, (n, x) in enumerate(zip(names, frame_sig, strict=True))},
-        "angle_sigma_note": ("orbit-frame error from the GNSS fit combined with the smoothed star-tracker error"
-                             if att_sig is not None else "orbit-frame error from the GNSS fit only (no smoothing: "
-                             "add the star-tracker noise of each sample)"),
-        "manoeuvres": {"n": len(result.manoeuvres_tai_ns), "segmented": bool(result.manoeuvres_tai_ns),
-                       "intervals_tai_ns": [list(m) for m in result.manoeuvres_tai_ns][:SUMMARY_LIST_MAX]},
-        "n_smoothing_segments": len(result.segments),
-        "smoothing_segments": [{"start_tai_ns": int(result.time_tai_ns[s.start]),
-                                "end_tai_ns": int(result.time_tai_ns[s.stop - 1]),
-                                "n_samples": s.stop - s.start, "harmonics": list(s.harmonics),
-                                "residual_rms_arcsec": (s.residual_rms_rad * arcsec).tolist()}
-                               for s in result.segments[:SUMMARY_LIST_MAX]],
-        "smoothing_residual_rms_arcsec": resid,
-        "n_ascending_nodes": int(result.ascending_nodes_tai_ns.size),
-        "ascending_nodes_tai_ns": [int(x) for x in result.ascending_nodes_tai_ns[:SUMMARY_LIST_MAX]],
-    }
-    return out
-
-
-def segment_table(result: OrbitalAttitude) -> dict[str, NDArray]:
-    """Every smoothing segment: start/end times, samples, harmonics and residual rms per sensor axis."""
-    segs = result.segments
-    t = result.time_tai_ns
-    res = np.array([s.residual_rms_rad for s in segs]).reshape(-1, 3) * ARCSEC_PER_RAD
-    h = np.array([s.harmonics for s in segs], dtype=np.int64).reshape(-1, 3)
-    man = np.zeros(len(segs), dtype=bool)
-    for a, b in result.manoeuvres_tai_ns:
-        man |= np.array([(t[s.start] >= a) & (t[s.stop - 1] <= b) for s in segs], dtype=bool)
-    return {"time_tai_ns": np.array([t[s.start] for s in segs], dtype=np.int64),
-            "end_tai_ns": np.array([t[s.stop - 1] for s in segs], dtype=np.int64),
-            "n_samples": np.array([s.stop - s.start for s in segs], dtype=np.int64),
-            "in_manoeuvre": man,
-            **{f"harmonics_z{i + 1}": h[:, i] for i in range(3)},
-            **{f"residual_rms_x{i + 1}_arcsec": res[:, i] for i in range(3)}}

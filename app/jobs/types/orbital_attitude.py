@@ -26,9 +26,8 @@ from processing.star_tracker.orbital_attitude import (
     EULER_SEQUENCES,
     OrbitalAttitudeError,
     orbital_attitude,
-    segment_table,
-    summary_of,
 )
+from processing.star_tracker.orbital_attitude_summary import segment_table, summary_of
 from processing.tasks import Progress, ResultWarning, TaskError, TaskInputs, TaskResult
 from processing.units import NS_PER_S
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from processing.attitude import rotations
-from processing.orbits.gnss_orbit import divided_difference_noise, time_tag_check
+from processing.orbits.gnss_checks import divided_difference_noise, time_tag_check
 from processing.screening.criteria import ScreeningParams, screen
 from processing.screening.tools import quantisation_step, time_grid_irregular
 from processing.simulate.realistic import simulate_realistic
@@ -135,7 +135,8 @@ def _gracefo_gnv(sat):
 
 @pytest.mark.parametrize("sat", ["C", "D"])
 def test_gracefo_gnv1b_precise_orbit_is_consistent_and_a_late_block_in_it_is_found(sat):
-    from processing.orbits.gnss_orbit import check_gnss_fit, fit_gnss
+    from processing.orbits.gnss_checks import check_gnss_fit
+    from processing.orbits.gnss_orbit import fit_gnss
 
     t, r, v = _gracefo_gnv(sat)  # 100 s of POD orbit at 1 Hz (sub-mm noise)
     c = check_gnss_fit(fit_gnss(t, r, v), t, r, v)

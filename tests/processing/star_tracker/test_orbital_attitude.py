@@ -13,10 +13,10 @@ from processing.simulate.seed003 import simulate_seed003
 from processing.star_tracker.orbital_attitude import (
     OrbitalAttitudeError,
     angle_stats_deg,
-    fit_trend_sines,
     orbital_attitude,
     smooth_attitude,
 )
+from processing.star_tracker.trend_sines import fit_trend_sines
 from processing.time.timescales import iso_to_tai_ns
 
 START = int(iso_to_tai_ns(["2023-06-01T00:00:00Z"])[0])

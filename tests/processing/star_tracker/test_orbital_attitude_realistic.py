@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from processing.attitude import rotations
-from processing.orbits.gnss_orbit import check_gnss_fit, fit_gnss
+from processing.orbits.gnss_checks import check_gnss_fit
+from processing.orbits.gnss_orbit import fit_gnss
 from processing.simulate.realistic import simulate_realistic
 from processing.star_tracker.orbital_attitude import OrbitalAttitudeError, euler_angles, orbital_attitude
 from processing.time.timescales import iso_to_tai_ns
