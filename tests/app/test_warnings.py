@@ -50,5 +50,13 @@ def test_unknown_codes_are_refused_and_the_cli_prints_warnings(capsys):
     args = argparse.Namespace(json=False, url="http://x", quiet=True)
     job = {"id": "j1", "status": "succeeded", "report_url": "/r", "result": {"warnings": [
         {"code": "time_offset", "message": "gyro lags the star tracker by 0.5 s", "evidence": {}}]}}
-    assert _job_outcome(args, job) == 0
-    assert "WARNING time_offset: gyro lags the star tracker by 0.5 s" in capsys.readouterr().out
+    class Reports:  # the report's headline, as the service would give it
+        def report_data(self, job_id: str) -> dict:
+            assert job_id == "j1"
+            return {"headline": {"verdict": "pass", "rows": [{"quantity": "gyro offset", "component": "x",
+                                                               "text": "0.1 ± 0.01", "unit": "deg/h"}]}}
+
+    assert _job_outcome(args, Reports(), job) == 0  # type: ignore[arg-type]
+    out = capsys.readouterr().out
+    assert "WARNING time_offset: gyro lags the star tracker by 0.5 s" in out
+    assert "verdict: PASS" in out and "gyro offset x: 0.1 ± 0.01 deg/h" in out
