@@ -38,7 +38,7 @@ lint: $(DEV)
 	$(BIN)/mypy app storage processing
 
 # Test files are spread over TEST_WORKERS processes (a file stays on one worker: module fixtures are built once).
-TEST_WORKERS ?= 2
+TEST_WORKERS ?= 3
 
 # ruff first (a second); mypy (about a minute of CPU) runs beside the suite, whose workers often wait on
 # servers and browsers; the target fails when either fails.
