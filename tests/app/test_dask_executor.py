@@ -72,6 +72,7 @@ def _run_all(client, jobs):
     return [wait(client, i, timeout_s=240) for i in ids]
 
 
+@SQLITE_ONLY  # results do not depend on the backend; PostgreSQL claiming is the local executor's (test_jobs_api)
 def test_same_results_on_local_and_dask_executors(settings, cluster):
     scenario = simulate_seed003(start_tai_ns=START, duration_s=600.0, seed=11)
     available = registry()
@@ -164,7 +165,7 @@ def test_a_job_is_running_only_while_a_worker_runs_it(settings, cluster):
     with open_client(dask_settings(settings, cluster)) as client:
         make_spacecraft(client)
         ids = [client.post("/api/v1/jobs", json={"type": "executor_check", "spacecraft": "sat1",
-                                                 "params": {"duration_s": 1.5}}).json()["id"] for _ in range(5)]
+                                                 "params": {"duration_s": 1.0}}).json()["id"] for _ in range(3)]
         most = 0
         deadline = time.monotonic() + 120
         while time.monotonic() < deadline:
@@ -174,12 +175,12 @@ def test_a_job_is_running_only_while_a_worker_runs_it(settings, cluster):
                 break
             time.sleep(0.05)
         jobs = [client.get(f"/api/v1/jobs/{i}").json() for i in ids]
-    assert [j["status"] for j in jobs] == ["succeeded"] * 5
+    assert [j["status"] for j in jobs] == ["succeeded"] * 3
     assert most <= 2  # two worker threads
     spans = [(datetime.fromisoformat(j["started_at"]), datetime.fromisoformat(j["finished_at"])) for j in jobs]
     for start, _ in spans:  # the recorded runs overlap no more than the threads allow: no wait counted in
         assert sum(a <= start < b for a, b in spans) <= 2
-    assert all((b - a).total_seconds() >= 1.5 for a, b in spans)
+    assert all((b - a).total_seconds() >= 1.0 for a, b in spans)
 
 
 def _partition_sum(part):
