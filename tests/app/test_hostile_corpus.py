@@ -28,7 +28,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
-from app.devserver import free_port
+from app.devserver import free_port, stop
 
 pytestmark = pytest.mark.sqlite_only
 
@@ -95,12 +95,7 @@ def server(tmp_path_factory) -> Iterator[dict[str, Any]]:
         yield {"base": base, "pid": proc.pid, "data": data, "operator": json.loads(body)["secret"],
                "rss_after_start_kb": vm_kb(proc.pid, "VmHWM")}
     finally:
-        proc.terminate()
-        try:
-            proc.wait(timeout=15)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
+        stop(proc)
         log.close()
 
 

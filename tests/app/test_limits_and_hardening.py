@@ -36,6 +36,7 @@ def limited(settings):
         c.__exit__(None, None, None)
 
 
+@pytest.mark.sqlite_only  # HTTP-level limit: the catalog's backend plays no part
 def test_body_limit_on_every_route(limited, settings):
     client = limited(max_upload_bytes=1000)
     r = upload(client, "gyro", GYRO)  # ~1.6 kB
@@ -53,6 +54,7 @@ def test_body_limit_on_every_route(limited, settings):
     assert stored_files(settings) == []
 
 
+@pytest.mark.sqlite_only  # HTTP-level limit: the catalog's backend plays no part
 def test_gzip_uploads_and_bombs(limited, settings):
     client = limited(max_upload_bytes=100_000)
     r = upload(client, "gyro", gzip.compress(GYRO.encode()), {**CSV, "Content-Encoding": "gzip"})
@@ -69,6 +71,7 @@ def test_gzip_uploads_and_bombs(limited, settings):
     assert r.status_code == 415
 
 
+@pytest.mark.sqlite_only  # HTTP-level limit: the catalog's backend plays no part
 def test_gzip_members_are_all_stored_and_trailing_bytes_refused(limited, settings):
     # The red team's case: two gzip members answered 201 rows=1000 of 2000 (the second was dropped).
     client = limited(max_upload_bytes=100_000)
@@ -84,12 +87,14 @@ def test_gzip_members_are_all_stored_and_trailing_bytes_refused(limited, setting
     assert len(stored_files(settings)) == 1  # only the first, whole upload
 
 
+@pytest.mark.sqlite_only  # HTTP-level limit: the catalog's backend plays no part
 def test_row_limit(limited):
     client = limited(max_upload_rows=10)
     r = upload(client, "gyro", GYRO)
     assert r.status_code == 413 and "10 rows per upload" in r.json()["detail"]
 
 
+@pytest.mark.sqlite_only  # HTTP-level limit: the catalog's backend plays no part
 def test_rate_limit_per_key(limited):
     client = limited(rate_limit_per_minute=5)  # make_spacecraft used one request
     statuses = [client.get("/api/v1/spacecraft").status_code for _ in range(6)]
@@ -117,6 +122,7 @@ def test_pagination_of_jobs(client):
     assert client.get("/api/v1/jobs", params={"limit": 10_000}).status_code == 422
 
 
+@pytest.mark.sqlite_only  # HTTP-level limit: the catalog's backend plays no part
 def test_security_headers_and_no_cors_by_default(client):
     r = client.get("/api/v1/spacecraft")
     assert r.headers["x-content-type-options"] == "nosniff" and r.headers["x-frame-options"] == "DENY"
@@ -126,6 +132,7 @@ def test_security_headers_and_no_cors_by_default(client):
     assert "access-control-allow-origin" not in pre.headers
 
 
+@pytest.mark.sqlite_only  # HTTP-level limit: the catalog's backend plays no part
 def test_cors_when_configured(limited):
     client = limited(cors_origins=("https://ops.example",))
     r = client.get("/api/v1/spacecraft", headers={"Origin": "https://ops.example"})
@@ -163,6 +170,7 @@ HOSTILE = [
 ]
 
 
+@pytest.mark.sqlite_only  # HTTP-level limit: the catalog's backend plays no part
 @pytest.mark.parametrize(("what", "body", "headers", "params", "status"), HOSTILE, ids=[h[0] for h in HOSTILE])
 def test_hostile_uploads(client, settings, what, body, headers, params, status):
     make_spacecraft(client)
@@ -171,6 +179,7 @@ def test_hostile_uploads(client, settings, what, body, headers, params, status):
     assert stored_files(settings) == []
 
 
+@pytest.mark.sqlite_only  # HTTP-level limit: the catalog's backend plays no part
 def test_path_like_names_stay_metadata(client, settings):
     make_spacecraft(client)
     r = upload(client, "gyro", GYRO, filename="../../../../etc/passwd")
@@ -229,6 +238,7 @@ def test_job_windows_outside_the_supported_years_are_422(client):
     assert client.get("/api/v1/jobs").json() == []
 
 
+@pytest.mark.sqlite_only  # HTTP-level limit: the catalog's backend plays no part
 def test_job_params_bounded_in_depth_items_and_strings(client):
     make_spacecraft(client)
     assert upload(client, "gyro", GYRO).status_code == 201
@@ -248,6 +258,7 @@ def test_job_params_bounded_in_depth_items_and_strings(client):
     assert client.get("/api/v1/jobs").json() == []
 
 
+@pytest.mark.sqlite_only  # HTTP-level limit: the catalog's backend plays no part
 def test_every_job_types_list_params_are_bounded(client):
     """Generic over the registry: any list-valued parameter of any job type refuses 65 items at submission."""
     from app.jobs.registry import registry
@@ -265,6 +276,7 @@ def test_every_job_types_list_params_are_bounded(client):
     assert checked >= 5 and client.get("/api/v1/jobs").json() == []
 
 
+@pytest.mark.sqlite_only  # HTTP-level limit: the catalog's backend plays no part
 def test_reconstruction_stage_params_validated_at_submission(client):
     make_spacecraft(client)
     assert upload(client, "gyro", GYRO).status_code == 201
@@ -286,6 +298,7 @@ def test_reconstruction_stage_params_validated_at_submission(client):
                                           ("* * * * * 0,1", False), ("0 * * * * *", False), ("* * * * * 0", True),
                                           ("* * * * *", True),
                                           ("@hourly", True), ("x" * 300, False)])
+@pytest.mark.sqlite_only  # HTTP-level limit: the catalog's backend plays no part
 def test_cron_period_floor(client, cron, ok):
     make_spacecraft(client)
     r = client.post("/api/v1/schedules", json={"name": "s", "cron": cron, "type": "telemetry_coverage",
@@ -293,6 +306,7 @@ def test_cron_period_floor(client, cron, ok):
     assert r.status_code == (201 if ok else 422), r.text[:300]
 
 
+@pytest.mark.sqlite_only  # HTTP-level limit: the catalog's backend plays no part
 def test_cron_floor_is_a_setting(limited):
     client = limited(min_schedule_period_s=1)
     r = client.post("/api/v1/schedules", json={"name": "s", "cron": "* * * * * *", "type": "telemetry_coverage",
@@ -325,6 +339,7 @@ def test_json_depth_scan_agrees_with_a_parser():
     assert json_depth(b"") == 0 and json_depth(b"[" * 100_000) == 100_000
 
 
+@pytest.mark.sqlite_only  # HTTP-level limit: the catalog's backend plays no part
 def test_json_bodies_and_query_strings_are_bounded(client):
     make_spacecraft(client)
     big = {"type": "executor_check", "spacecraft": "sat1", "params": {}, "reference": {"k": "x" * (2 << 20)}}
@@ -338,6 +353,7 @@ def test_json_bodies_and_query_strings_are_bounded(client):
     assert client.get("/api/v1/jobs").json() == []
 
 
+@pytest.mark.sqlite_only  # HTTP-level limit: the catalog's backend plays no part
 def test_json_records_with_many_distinct_keys_are_refused_fast(client, settings):
     # The red team's case: 6,000 records of distinct keys (83 kB) took 10 s and 838 MB (records x keys).
     import json
@@ -352,6 +368,7 @@ def test_json_records_with_many_distinct_keys_are_refused_fast(client, settings)
     assert stored_files(settings) == []
 
 
+@pytest.mark.sqlite_only  # HTTP-level limit: the catalog's backend plays no part
 def test_parquet_rows_and_decoded_size_checked_from_the_footer(limited, settings, monkeypatch):
     client = limited(max_upload_rows=1000)
     many = pa.table({"time": pa.array(np.full(200_000, 1.7e9)), "wx": np.zeros(200_000), "wy": np.zeros(200_000),
@@ -379,6 +396,7 @@ def test_parquet_rows_and_decoded_size_checked_from_the_footer(limited, settings
     assert stored_files(settings) == []
 
 
+@pytest.mark.sqlite_only  # HTTP-level limit: the catalog's backend plays no part
 def test_an_upload_spread_over_too_many_days_is_refused_before_writing(client, settings):
     # The red team's case: 20,000 rows on 20,000 days took 192 s and wrote 22,300 files.
     import time
@@ -393,6 +411,7 @@ def test_an_upload_spread_over_too_many_days_is_refused_before_writing(client, s
     assert stored_files(settings) == []
 
 
+@pytest.mark.sqlite_only  # HTTP-level limit: the catalog's backend plays no part
 def test_the_day_cap_is_a_setting(limited, settings):
     client = limited(max_upload_days=3)
     days = 1.5e9 + 86400.0 * np.arange(4)
@@ -472,6 +491,7 @@ def test_fair_queued_ids_shares_slots_between_keys(tmp_path):
     engine.dispose()
 
 
+@pytest.mark.sqlite_only  # HTTP-level limit: the catalog's backend plays no part
 @pytest.mark.parametrize("name", [".", "..", "...", "a\n", "a\r", "a\t", "\x00", "a b", "é"])
 def test_names_are_refused_everywhere(client, name):
     make_spacecraft(client, "sat1", {})
