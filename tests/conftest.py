@@ -71,7 +71,7 @@ def client(settings: Settings) -> Iterator[TestClient]:
 FIRST = ("tests/app/test_crash_safety.py", "tests/app/test_dask_executor.py", "tests/app/test_schemathesis.py",
          "tests/web/test_ui.py", "tests/app/test_reports.py", "tests/storage/test_concurrent_ingest.py",
          "tests/app/test_schedules.py", "tests/app/test_hostile_corpus.py", "tests/app/test_client.py",
-         "tests/app/test_cli.py")
+         "tests/app/test_cli.py", "tests/app/test_report_rerun.py")
 """Files that mostly wait (real server processes, clusters, browsers) or build large worlds: scheduled first,
 so that under ``--dist loadfile`` they do not end the run alone on one worker while the other idles."""
 

@@ -5,7 +5,7 @@ must die with it. Even cycles kill the service early (its first job submission s
 types, the forkserver still preloading them), odd ones once a job was submitted. After the cycles: every
 upload acknowledged with 201 is fully readable, no upload is partly visible, every catalogued file exists
 and reads, no unreferenced file is left on disk, and no job stays queued or running. The number of cycles
-is ATTITUDE_CRASH_CYCLES (default 4 on SQLite, 2 on PostgreSQL, to keep CI within its budget; set it
+is ATTITUDE_CRASH_CYCLES (default 3 on SQLite, 2 on PostgreSQL, to keep CI within its budget; set it
 higher for a soak run, e.g. 30).
 """
 
@@ -120,7 +120,7 @@ def rows_of(base, batch):
 
 
 def test_sigkill_during_uploads_and_jobs(tmp_path: Path, database_url: str):
-    cycles = int(os.environ.get("ATTITUDE_CRASH_CYCLES", "4" if database_url.startswith("sqlite") else "2"))
+    cycles = int(os.environ.get("ATTITUDE_CRASH_CYCLES", "3" if database_url.startswith("sqlite") else "2"))
     env = {"ATTITUDE_DATA_DIR": str(tmp_path / "data"), "ATTITUDE_DATABASE_URL": database_url,
            "ATTITUDE_BOOTSTRAP_TOKEN": TOKEN, "ATTITUDE_JOB_HEARTBEAT_TIMEOUT_S": "2", "ATTITUDE_MAX_JOBS": "2",
            "ATTITUDE_RATE_LIMIT_PER_MINUTE": "1000000"}

@@ -16,7 +16,6 @@ import re
 import subprocess
 import time
 import types
-import urllib.parse
 from pathlib import Path
 
 import numpy as np
@@ -37,9 +36,7 @@ from tests.app.report_world import (
     output_dir,
     png_ink_fraction,
     report_world,
-    strip_volatile,
 )
-from tests.app.test_jobs_api import wait
 
 ADMIN = "reports-admin-token-0123456789"
 TIMINGS: dict[str, dict[str, float]] = {}
@@ -171,30 +168,6 @@ def test_pdf_without_chromium_is_drawn_by_matplotlib(world, monkeypatch):
     pages = pdf_pages(r.content, "fallback_telemetry_coverage")
     assert len(pages) >= 1 + len(figure_artifacts(world.client, job["id"]))
     assert all(png_ink_fraction(p) > BLANK for p in pages)
-
-
-@pytest.mark.parametrize("job_type", all_type_names())
-def test_rerun_from_the_report_reproduces_it(world, job_type):
-    job = finished(world, job_type)
-    client = world.client
-    rep = client.get(f"/api/v1/jobs/{job['id']}/report", params={"format": "json"}).json()
-    body = rep["reproduce"]["request"]
-    ui = urllib.parse.urlsplit(rep["reproduce"]["ui_url"])
-    query = dict(urllib.parse.parse_qsl(ui.query))
-    assert body == expected_rerun(job)
-    assert ui.path == "/ui/jobs/new"
-    assert (query["type"], query["spacecraft"], query.get("start"), query.get("end")) == (
-        job_type, job["spacecraft"], body.get("start"), body.get("end"))
-    assert json.loads(query["params"]) == job["params"]
-    r = client.post("/api/v1/jobs", json=body)
-    assert r.status_code == 202, r.text
-    again = wait(client, r.json()["id"], timeout_s=900)
-    assert again["status"] == "succeeded", again["error"]
-    assert (again["params"], again["reference"]) == (job["params"], job["reference"])
-    if "start" in body:
-        assert (again["start"], again["end"]) == (job["start"], job["end"])
-    assert again["inputs"] == job["inputs"]
-    assert strip_volatile(again["result"]) == strip_volatile(job["result"])
 
 
 def test_json_report_says_what_was_processed_and_judges_the_specification(world):
