@@ -47,6 +47,7 @@ from numpy.typing import NDArray
 
 from processing.attitude import rotations
 from processing.estimation.chi2 import chi2_sf
+from processing.estimation.consistency import ljung_box, whiteness
 from processing.signal.sine_series import SineSeriesSolver
 from processing.star_tracker.smoothing import seconds_since, split_segments
 from processing.tasks import ResultWarning
@@ -203,25 +204,16 @@ def _smooth(t_ns: NDArray, d: NDArray, cfg: MultiHeadSettings) -> tuple[NDArray,
 def _ljung_box_p(e: NDArray, coincident: NDArray) -> float:
     """Smallest Ljung-Box p-value over the components of the residuals at real (coincident) samples."""
     x = e[coincident & np.all(np.isfinite(e), axis=1)]
-    n = x.shape[0]
-    if n <= 4 * LJUNG_BOX_LAGS:
+    if x.shape[0] <= 4 * LJUNG_BOX_LAGS:
         return float("nan")
-    x = x - x.mean(axis=0)
-    den = np.sum(x * x, axis=0)
-    lags = np.arange(1, LJUNG_BOX_LAGS + 1)
-    rho = np.stack([np.sum(x[:-k] * x[k:], axis=0) for k in lags]) / den
-    q = n * (n + 2) * np.sum(rho**2 / (n - lags)[:, None], axis=0)
-    return float(np.min(chi2_sf(q, LJUNG_BOX_LAGS)))
+    return float(np.nanmin(ljung_box(x, LJUNG_BOX_LAGS).p))
 
 
 def _rho_inflation(e: NDArray) -> float:
     """1 + 2 sum_l rho_l^2 (largest over components): the variance factor of a sample variance of a correlated
     sequence, lags up to LJUNG_BOX_LAGS."""
-    x = e[np.all(np.isfinite(e), axis=1)]
-    x = x - x.mean(axis=0)
-    den = np.sum(x * x, axis=0)
-    rho = np.stack([np.sum(x[:-k] * x[k:], axis=0) for k in range(1, LJUNG_BOX_LAGS + 1)]) / den
-    return float(np.max(1 + 2 * np.sum(rho**2, axis=0)))
+    rho = whiteness(e[np.all(np.isfinite(e), axis=1)], LJUNG_BOX_LAGS).rho
+    return float(np.nanmax(1 + 2 * np.sum(rho**2, axis=1)))
 
 
 @dataclass(frozen=True)
