@@ -20,12 +20,13 @@ from dataclasses import dataclass, replace
 from typing import Annotated, Any, Literal
 
 import numpy as np
-from matplotlib.figure import Figure
 from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field, PositiveFloat
 
 from app.jobs.registry import JobType
+from app.jobs.types.gyro_bias_fit_figures import figures
 from app.reports.headline import Answer
+from app.services.times import iso
 from processing.attitude import rotations
 from processing.gyro_calibration.bias_fit import (
     RESIDUAL_CONSISTENCY_MAX,
@@ -43,8 +44,7 @@ from processing.gyro_calibration.subintervals import (
 from processing.signal.sine_series import SineSeriesError, fit_sine_series, select_harmonics
 from processing.star_tracker.plausibility import PlausibilityError, PlausibilityResult, check_star_tracker_gyro
 from processing.tasks import Progress, ResultWarning, TaskError, TaskInputs, TaskResult
-from processing.time.timescales import tai_ns_to_iso
-from processing.units import ARCSEC_PER_RAD, DEG_H_PER_RAD_S, NS_PER_S, RAD_PER_ARCSEC, RAD_PER_DEG
+from processing.units import ARCSEC_PER_RAD, NS_PER_S, RAD_PER_ARCSEC, RAD_PER_DEG
 
 RATES_TABLE_MAX_ROWS = 20_000
 """The "rates" table (figure 13a) keeps every k-th gyro sample so that it has at most this many rows."""
@@ -109,8 +109,6 @@ def _floats(x: Any) -> list[float]:
     return [float(v) for v in np.asarray(x, dtype=np.float64).reshape(-1)]
 
 
-def _iso(t_ns: int) -> str:
-    return str(tai_ns_to_iso(np.array([t_ns], dtype=np.int64))[0])
 
 
 def _choose_sensors(inputs: TaskInputs, params: Params) -> tuple[list[str], dict[str, NDArray[np.float64]]]:
@@ -416,7 +414,7 @@ def _run_segments(inputs: TaskInputs, params: Params, progress: Progress,
     one = params.model_copy(update={"split_at_gyro_gaps": False})
     for k, (a, b) in enumerate(segments):
         if (b - a) / NS_PER_S < params.min_segment_s:
-            notes.append(f"gyro segment {k + 1} ({_iso(a)} to {_iso(b)}, {(b - a) / NS_PER_S:.3g} s) is shorter than "
+            notes.append(f"gyro segment {k + 1} ({iso(a)} to {iso(b)}, {(b - a) / NS_PER_S:.3g} s) is shorter than "
                          f"min_segment_s = {params.min_segment_s:g} s: skipped")
             continue
         def seg_progress(f: float, st: str, k: int = k) -> None:
@@ -425,7 +423,7 @@ def _run_segments(inputs: TaskInputs, params: Params, progress: Progress,
         try:
             res = _run_one(_restricted(inputs, a, b), one, seg_progress)
         except TaskError as exc:
-            notes.append(f"gyro segment {k + 1} ({_iso(a)} to {_iso(b)}) not fitted: {exc}")
+            notes.append(f"gyro segment {k + 1} ({iso(a)} to {iso(b)}) not fitted: {exc}")
             continue
         results.append(((a, b), res))
     if not results:
@@ -443,7 +441,7 @@ def _run_segments(inputs: TaskInputs, params: Params, progress: Progress,
     inflation = 1.0 if consistent else float(np.sqrt(chi2 / dof))
     longest = max(range(len(results)), key=lambda i: results[i][0][1] - results[i][0][0])
     base = results[longest][1]
-    rows = [{"index": i, "start": _iso(a), "end": _iso(e), "start_tai_ns": a, "end_tai_ns": e,
+    rows = [{"index": i, "start": iso(a), "end": iso(e), "start_tai_ns": a, "end_tai_ns": e,
              "duration_s": (e - a) / NS_PER_S, "n_star_tracker_samples": r.summary["n_star_tracker_samples"],
              "n_gyro_samples": r.summary["n_gyro_samples"], "gyro_bias_rad_s": r.summary["gyro_bias_rad_s"],
              "gyro_bias_sigma_rad_s": r.summary["gyro_bias_sigma_rad_s"], "converged": r.summary["converged"],
@@ -590,7 +588,7 @@ def _subinterval_rows(r: _Outcome) -> list[dict[str, Any]]:
         start_ns, end_ns = epoch + int(round(a * NS_PER_S)), epoch + int(round(e * NS_PER_S))
         row: dict[str, Any] = {
             "kind": kind, "parts": parts, "index": index,
-            "start": _iso(start_ns), "end": _iso(end_ns), "start_tai_ns": start_ns, "end_tai_ns": end_ns,
+            "start": iso(start_ns), "end": iso(end_ns), "start_tai_ns": start_ns, "end_tai_ns": end_ns,
         }
         if fit_k is None:
             row.update(n_samples=0, gyro_bias_rad_s=None, gyro_bias_sigma_rad_s=None)
@@ -680,7 +678,7 @@ def _summary(r: _Outcome, sub_rows: list[dict[str, Any]], warnings: list[ResultW
         "initial_mrp": _floats(fit.initial_mrp),
         "initial_mrp_sigma": _floats(fit.sigma[:3]),
         "initial_mrp_sigma_paper": _floats(fit.sigma_paper[:3]),
-        "initial_time": _iso(t0_ns),
+        "initial_time": iso(t0_ns),
         "initial_time_tai_ns": t0_ns,
         "initial_q_IS": _floats(fit.q_IR0),
         "initial_q_IB": _floats(q_IB0),
@@ -750,77 +748,6 @@ def _subinterval_table(sub_rows: list[dict[str, Any]]) -> dict[str, NDArray[Any]
         vals = np.array([r.get(key) or [np.nan] * 3 for r in sub_rows], dtype=np.float64).reshape(-1, 3)
         table.update({col.format(i + 1): vals[:, i] for i in range(3)})
     return table
-
-# ---------------------------------------------------------------------------------------------------
-# Figures (003 figs. 13-16).
-
-
-def figures(result: TaskResult, params: Params) -> dict[str, Figure]:
-    """Rates with their approximation (fig. 13a), residual rotations per sensor axis (figs. 13b-c, 14),
-    offsets per sub-interval (the numbers of figs. 15-16)."""
-    figs: dict[str, Figure] = {}
-    summary = result.summary
-    res = result.tables["residuals"]
-    t_ref = int(np.min(res["time_tai_ns"]))
-
-    def seconds(t_ns: NDArray[Any]) -> NDArray[np.float64]:
-        return (np.asarray(t_ns, dtype=np.int64) - t_ref).astype(np.float64) / NS_PER_S
-
-    start = _iso(t_ref)
-    rates = result.tables["rates"]
-    fig = Figure(figsize=(8, 7), layout="constrained")
-    axes = fig.subplots(3, 1, sharex=True)
-    for i, ax in enumerate(axes):
-        ax.plot(seconds(rates["time_tai_ns"]), rates[f"w{i + 1}_B_deg_s"], lw=0.4, color="0.6", label="gyro - bias")
-        if f"w{i + 1}_B_ap_deg_s" in rates:
-            ax.plot(seconds(rates["time_tai_ns"]), rates[f"w{i + 1}_B_ap_deg_s"], lw=1.2, color="C0", label="omega_ap")
-        ax.set_ylabel(f"w{i + 1}, deg/s")
-    axes[0].legend(loc="upper right", fontsize="small")
-    axes[-1].set_xlabel(f"t, s from {start}")
-    fig.suptitle("Body rates (003 fig. 13a), body axes y1 y2 y3")
-    figs["rates"] = fig
-
-    fig = Figure(figsize=(8, 7), layout="constrained")
-    axes = fig.subplots(3, 1, sharex=True)
-    ref = summary["reference_sensor"]
-    sel = np.asarray(res["sensor"]) == ref
-    rms = summary["residual_rms_arcsec"]
-    for i, ax in enumerate(axes):
-        ax.plot(seconds(res["time_tai_ns"][sel]), res[f"e{i + 1}_arcsec"][sel], lw=0.8, marker=".", ms=2)
-        for s in (-1, 1):
-            ax.axhline(s * rms[i], color="C3", lw=0.8)
-        ax.set_ylabel(f"e{i + 1}, arcsec")
-        ax.set_title(f"rms {rms[i]:.2f}\" (gyro noise part {summary['residual_rms_gyro_arcsec'][i]:.2f}\")",
-                     fontsize="small", loc="right")
-    axes[-1].set_xlabel(f"t, s from {start}")
-    fig.suptitle(f"Residual rotations, {ref} axes x1 x2 x3, scheme {summary['scheme']} (003 figs. 13b-c)")
-    figs["residuals"] = fig
-
-    sub = result.tables["subintervals"]
-    fig = Figure(figsize=(8, 7), layout="constrained")
-    axes = fig.subplots(3, 1, sharex=True)
-    a, e = seconds(sub["start_tai_ns"]), seconds(sub["end_tai_ns"])
-    t_end = float(seconds(res["time_tai_ns"]).max())
-    to_deg_h = DEG_H_PER_RAD_S
-    for i, ax in enumerate(axes):  # body axes and deg/h: the frame and unit of the summary and the specification
-        d = summary["gyro_bias_rad_s"][i] * to_deg_h
-        s = summary["gyro_bias_sigma_rad_s"][i] * to_deg_h
-        ax.axhspan(d - 3 * s, d + 3 * s, color="0.85", label="whole segment ±3σ")
-        ax.hlines(d, 0.0, t_end, color="k", lw=1.0)
-        v = np.asarray(sub[f"gyro_bias{i + 1}_rad_s"], dtype=float) * to_deg_h
-        sv = np.asarray(sub[f"gyro_bias{i + 1}_sigma_rad_s"], dtype=float) * to_deg_h
-        ok = np.isfinite(v)
-        ax.hlines(v[ok], a[ok], e[ok], color="C0", lw=2.0)
-        ax.errorbar(0.5 * (a[ok] + e[ok]), v[ok], yerr=3 * sv[ok], fmt="none", ecolor="C0", capsize=3,
-                    label="sub-interval ±3σ")
-        ax.set_ylabel(f"b_{'xyz'[i]} (body), deg/h")
-    axes[0].legend(loc="upper right", fontsize="small")
-    axes[-1].set_xlabel(f"t, s from {start}")
-    fig.suptitle("Gyro bias b per sub-interval, body axes x y z (w_meas = w + b), as in the specification\n"
-                 f"(003 §2.4 figs. 15-16 show Δ = -b in {ref} sensor axes, arcsec/s: summary delta_sensor_arcsec_s)",
-                 fontsize="medium")
-    figs["subintervals"] = fig
-    return figs
 
 
 JOB = JobType(
