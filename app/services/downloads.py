@@ -84,15 +84,49 @@ def table_download(table: pa.Table, fmt: str, time_scale: str, time_format: str,
     return Download(encode(timed, fmt), FORMATS[fmt], f"{stem}.{fmt}")
 
 
-STREAMED_FORMATS = ("csv", "json", "arrow")
-"""Formats written chunk by chunk as the rows are read (constant memory); Parquet needs the whole file."""
+STREAMED_FORMATS = ("csv", "json", "arrow", "parquet")
+"""Formats written chunk by chunk as the rows are read (constant memory): Parquet one row group per chunk."""
+
+
+class _Spool:
+    """A write-only file for a streaming writer: the bytes written since the last :meth:`take`, and the position
+    of everything written so far (Parquet records row-group offsets from ``tell``)."""
+
+    def __init__(self) -> None:
+        self._parts: list[bytes] = []
+        self._position = 0
+        self.closed = False
+
+    def write(self, data: bytes | memoryview) -> int:
+        chunk = bytes(data)
+        self._parts.append(chunk)
+        self._position += len(chunk)
+        return len(chunk)
+
+    def tell(self) -> int:
+        return self._position
+
+    def flush(self) -> None:
+        pass
+
+    def writable(self) -> bool:
+        return True
+
+    def close(self) -> None:
+        self.closed = True
+
+    def take(self) -> bytes:
+        out = b"".join(self._parts)
+        self._parts.clear()
+        return out
 
 
 def stream_chunks(chunks: Iterator[pa.Table], fmt: str, time_scale: str, time_format: str) -> Iterator[bytes]:
-    """The encoded download of consecutive tables: one CSV header, one JSON array, one Arrow IPC stream."""
+    """The encoded download of consecutive tables: one CSV header, one JSON array, one Arrow IPC stream, one Parquet
+    file (a row group per table)."""
     first = True
     writer: Any = None
-    sink = io.BytesIO()
+    sink = _Spool()
     for table in chunks:
         timed = with_timestamps(table, time_scale) if fmt in BINARY_FORMATS else with_times(table, time_scale,
                                                                                              time_format)
@@ -109,19 +143,18 @@ def stream_chunks(chunks: Iterator[pa.Table], fmt: str, time_scale: str, time_fo
             continue
         else:
             if writer is None:
-                writer = pa.ipc.new_stream(sink, timed.schema)
+                writer = (pa.ipc.new_stream(pa.PythonFile(sink, mode="w"), timed.schema) if fmt == "arrow"
+                          else pq.ParquetWriter(pa.PythonFile(sink, mode="w"), timed.schema))
             writer.write_table(timed)
-            yield sink.getvalue()
-            sink.seek(0)
-            sink.truncate()
+            yield sink.take()
         first = False
     if fmt == "json":
         yield b"[]" if first else b"]"
     elif fmt == "csv" and first:
         yield b""
-    elif fmt == "arrow" and writer is not None:
+    elif writer is not None:  # arrow: the end-of-stream marker; parquet: the footer
         writer.close()
-        yield sink.getvalue()
+        yield sink.take()
 
 
 @dataclass(frozen=True)

@@ -1,5 +1,5 @@
-"""Large telemetry reads are streamed in chunks (CSV, JSON, Arrow): the same bytes/rows as a whole read, in the
-same order, across many files, several sensors and overlapping uploads; Parquet keeps the row cap."""
+"""Large telemetry reads are streamed in chunks (CSV, JSON, Arrow, Parquet): the same bytes/rows as a whole read,
+in the same order, across many files, several sensors and overlapping uploads; whole reads keep the row cap."""
 
 from __future__ import annotations
 
@@ -9,6 +9,7 @@ from dataclasses import replace
 
 import numpy as np
 import pyarrow as pa
+import pyarrow.parquet as pq
 import pytest
 from fastapi.testclient import TestClient
 
@@ -56,7 +57,7 @@ def _get(settings, **params) -> bytes:  # noqa: ANN001
         return r.content
 
 
-@pytest.mark.parametrize("fmt", ["csv", "json", "arrow"])
+@pytest.mark.parametrize("fmt", ["csv", "json", "arrow", "parquet"])
 def test_streamed_read_equals_the_whole_read(stored, fmt):  # noqa: ANN001
     whole = _get(stored, format=fmt)
     streamed = _get(replace(stored, stream_read_rows=150), format=fmt)  # chunks of a file or so
@@ -64,6 +65,9 @@ def test_streamed_read_equals_the_whole_read(stored, fmt):  # noqa: ANN001
         a = pa.ipc.open_stream(io.BytesIO(whole)).read_all()
         b = pa.ipc.open_stream(io.BytesIO(streamed)).read_all()
         assert a.num_rows == 2500 and a.equals(b)
+    elif fmt == "parquet":  # one row group per chunk, the same rows and types
+        a, f = pq.read_table(io.BytesIO(whole)), pq.ParquetFile(io.BytesIO(streamed))
+        assert f.metadata.num_row_groups > 5 and a.num_rows == 2500 and a.equals(f.read())
     else:
         assert streamed == whole
     if fmt == "json":
@@ -71,12 +75,13 @@ def test_streamed_read_equals_the_whole_read(stored, fmt):  # noqa: ANN001
         assert len(rows) == 2500 and [r["sensor"] for r in rows[:1]] == ["g1"] and rows[-1]["sensor"] == "g2"
 
 
-def test_streamed_window_and_sensor_and_the_parquet_cap(stored):  # noqa: ANN001
+def test_streamed_window_and_sensor_and_the_whole_read_cap(stored):  # noqa: ANN001
     window = {"start": str((START + DAY_NS // 2) / 1e9), "end": str((START + 2 * DAY_NS + 3600 * 10**9) / 1e9),
               "time_scale": "tai", "sensor": "g2", "format": "csv"}
     small = replace(stored, stream_read_rows=100, max_read_rows=500)
     assert _get(small, **window) == _get(stored, **window)
-    with _client(small) as c:  # Parquet cannot be streamed: the cap answers 413 before reading
+    with _client(small) as c:  # streamed: the cap of whole reads does not apply
+        assert c.get("/api/v1/spacecraft/sat1/telemetry/gyro", params={"format": "parquet"}).status_code == 200
+    with _client(replace(stored, max_read_rows=500)) as c:  # read whole: the cap answers 413 before reading
         r = c.get("/api/v1/spacecraft/sat1/telemetry/gyro", params={"format": "parquet"})
         assert r.status_code == 413 and "ATTITUDE_MAX_READ_ROWS" in r.json()["detail"]
-        assert c.get("/api/v1/spacecraft/sat1/telemetry/gyro", params={"format": "csv"}).status_code == 200
