@@ -270,9 +270,19 @@ def iter_window(session: Session, store: ParquetStore, spacecraft_id: int, spec:
             if not tables:
                 continue
             table = pa.concat_tables(tables, promote_options="permissive")
-            table = table.filter(pa.compute.equal(table.column("sensor"), s))
+            if any(f.sensors != s for f in group):  # files of this sensor alone need no filtering
+                table = table.filter(pa.compute.equal(table.column("sensor"), s))
             if table.num_rows:
-                yield _sort_unique(table, spec).select(names)
+                yield (table if _in_identity_order(table, spec) else _sort_unique(table, spec)).select(names)
+
+
+def _in_identity_order(table: pa.Table, spec: StreamSpec) -> bool:
+    """True when one sensor's rows of a stream keyed by time alone are already strictly increasing in time
+    (files that follow each other, the usual case): sorted and unique, so no sort copy is needed."""
+    if spec.key:
+        return False
+    t = table.column(TIME_COLUMN).to_numpy()
+    return bool(np.all(t[1:] > t[:-1]))
 
 
 def read_series(session: Session, store: ParquetStore, spacecraft_id: int, spec: StreamSpec, sensor: str,

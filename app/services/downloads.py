@@ -121,13 +121,27 @@ class _Spool:
         return out
 
 
+TEXT_PIECE_ROWS = 65_536
+"""CSV and JSON are encoded in pieces of this many rows (their text, and JSON's Python objects, are several
+times the size of the Arrow rows), so the memory of a streamed text read is that of one chunk read plus one piece."""
+
+
+def _pieces(chunks: Iterator[pa.Table], fmt: str) -> Iterator[pa.Table]:
+    for table in chunks:
+        if fmt in ("csv", "json") and table.num_rows > TEXT_PIECE_ROWS:
+            for offset in range(0, table.num_rows, TEXT_PIECE_ROWS):
+                yield table.slice(offset, TEXT_PIECE_ROWS)
+        else:
+            yield table
+
+
 def stream_chunks(chunks: Iterator[pa.Table], fmt: str, time_scale: str, time_format: str) -> Iterator[bytes]:
     """The encoded download of consecutive tables: one CSV header, one JSON array, one Arrow IPC stream, one Parquet
     file (a row group per table)."""
     first = True
     writer: Any = None
     sink = _Spool()
-    for table in chunks:
+    for table in _pieces(chunks, fmt):
         timed = with_timestamps(table, time_scale) if fmt in BINARY_FORMATS else with_times(table, time_scale,
                                                                                              time_format)
         if fmt == "csv":
