@@ -12,9 +12,11 @@ import pytest
 from app.jobs.outputs import jsonable
 from app.jobs.types import data_screening
 from processing.simulate.realistic import simulate_realistic
+from processing.simulate.seed003 import ST_NOISE_STD_003_RAD
 from processing.spacecraft import Spacecraft
 from processing.tasks import TaskError, TaskInputs, no_progress
 from processing.time.timescales import iso_to_tai_ns
+from processing.units import ARCSEC_PER_RAD
 
 T0 = int(iso_to_tai_ns("2023-06-01T00:00:00"))
 
@@ -152,3 +154,48 @@ def test_orbital_attitude_job_warns_of_late_gnss_tags_and_specs_judge_the_stated
     checks231 = specs.evaluate("orbital_attitude", s, spec231)
     assert (False,) in [c.passed for c in checks231]  # the same data in 2-3-1 leave the pitch range
     assert all(c.key.startswith("angles_by_sequence.231.") for c in checks231)
+
+
+def test_star_tracker_accuracy_uses_the_1hz_gyro_at_the_harmonic_cap():
+    from app.jobs.types import star_tracker_accuracy as sta
+
+    sc = scenario(duration_s=1200.0, seed=18, n_long_gaps=0, n_late_blocks=0, dropout_probability=0.13)
+    t, g = sc.streams["star_tracker"]["time_tai_ns"], sc.streams["gyro"]["time_tai_ns"]
+    m = (t.size - 2) // 4  # the automatic M's cap, what the issue's real day reached (M = 249 per segment)
+    k = int(np.count_nonzero((g >= t[0]) & (g <= t[-1])))
+    assert k < 4 * (m + 2)  # the rule before issue 23 (4 gyro samples per parameter) dropped this gyro
+    res = sta.JOB.run(inputs(sc, ("star_tracker", "gyro")), sta.Params(harmonics=m), no_progress)
+    s = res.summary
+    assert s["gyro_used"] and s["gyro_coverage"]["n_used"] == s["n_segments"] == 1
+    assert not any("gyro not used" in n for n in res.notes)
+    (line,) = s["gyro_lines"]  # the 0.4 Hz vibration seen by both and removed
+    assert abs(line["freq_hz"] - 0.4) < 1e-3 and line["removed"]
+    truth = np.array(ST_NOISE_STD_003_RAD) * ARCSEC_PER_RAD
+    np.testing.assert_allclose(s["sigma_arcsec"], truth, rtol=0.08)
+    assert s["sigma_smoothing_arcsec"][0] > 1.15 * truth[0]  # what the star tracker alone reports
+
+
+def test_star_tracker_accuracy_says_which_gyro_criterion_failed_with_value_and_threshold():
+    from app.jobs.types import star_tracker_accuracy as sta
+
+    sc = scenario(duration_s=600.0, seed=19, n_long_gaps=0, n_late_blocks=0)
+    g = sc.streams["gyro"]
+    t_s = (g["time_tai_ns"] - g["time_tai_ns"][0]) / 1e9
+    cases = {"gap": (t_s < 200.0) | (t_s > 340.0), "rate": np.arange(t_s.size) % 3 == 0}
+    for criterion, keep in cases.items():
+        streams = {"star_tracker": sc.streams["star_tracker"], "gyro": {c: v[keep] for c, v in g.items()}}
+        window = TaskInputs(streams=streams, spacecraft=Spacecraft.from_json(sc.config),
+                            start_tai_ns=int(T0), end_tai_ns=int(T0 + 600 * 10**9))
+        res = sta.JOB.run(window, sta.Params(), no_progress)
+        s = res.summary
+        cov = s["gyro_coverage"]
+        assert not s["gyro_used"] and cov["n_used"] == 0 and cov["n_failed"][criterion] == cov["n_segments"] == 1
+        (row,) = cov["not_used"]
+        assert row["criterion"] == criterion
+        (note,) = [n for n in res.notes if n.startswith("gyro not used")]
+        if criterion == "gap":
+            assert 140.0 <= row["value"] < 143.0 and row["threshold"] == cov["thresholds"]["max_gap_s"] == 120.0
+            assert f"gyro gap of {row['value']:.1f} s" in note and "> max_gap_s = 120 s" in note
+        else:
+            assert abs(row["value"] - 1 / 3) < 0.02 and row["threshold"] == 0.5
+            assert "Hz, the star tracker at" in note and f"(ratio {row['value']:.3g} < 0.5)" in note
