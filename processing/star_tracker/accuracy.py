@@ -36,8 +36,8 @@ Method (003 = Avanesov et al., Keldysh Institute preprint 74, 2010):
    the smoothed gyro to the mean of the star-tracker rates, rms difference per axis; the
    difference expected from the star-tracker noise (propagated through the fit's derivative) and
    the gyro noise is reported beside it. A segment uses the gyro only when the gyro covers it at the
-   star tracker's rate (processing.star_tracker.gyro_coverage: rate, longest gap, samples per
-   parameter); the notes name the failed criterion, its value and threshold for the others.
+   star tracker's rate (processing.star_tracker.gyro_coverage: rate, samples per parameter); the
+   notes name the failed criterion, its value and threshold for the others.
 6. Spectra (003 §1.5, processing.signal.spectral): amplitude spectra of the gyro rates, of the
    star-tracker rates and of the star-tracker residuals; lines above the smoother's cutoff
    M/(2T) detected with a false-alarm threshold, with the attitude amplitude A/(2 pi f), its rms
@@ -409,7 +409,7 @@ def analyze_star_tracker_accuracy(
     coverage: tuple[GyroCoverage, ...] = ()
     if gyro_time_tai_ns is not None and w_G_rad_s is not None:  # 5, 7
         g_ns, w_B_gyro = _gyro_rates(gyro_time_tai_ns, w_G_rad_s, q_BG)
-        coverage = tuple(segment_gyro_coverage(s.sl.start, s.sl.stop, inp.t_ns, g_ns, s.fit_raw.harmonics, max_gap_s)
+        coverage = tuple(segment_gyro_coverage(s.sl.start, s.sl.stop, inp.t_ns, g_ns, s.fit_raw.harmonics)
                          for s in segments)
         notes += coverage_notes(coverage)
         gyro = analyze_gyro(segments, [c.idx if c.used else None for c in coverage], g_ns, w_B_gyro, inp.dcm_BS,

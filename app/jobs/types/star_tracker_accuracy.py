@@ -150,12 +150,12 @@ def _coverage_summary(r: StarTrackerAccuracy) -> dict[str, Any]:
     return {
         "n_segments": len(cov),
         "n_used": len(cov) - len(unused),
-        "n_failed": {k: sum(c.criterion == k for c in unused) for k in ("gap", "rate", "samples")},
-        "thresholds": {"max_gap_s": cov[0].max_gap_s,
-                       "min_rate_ratio": GYRO_MIN_RATE_RATIO,
-                       "samples_per_parameter": GYRO_SAMPLES_PER_PARAMETER},
+        "n_failed": {k: sum(c.criterion == k for c in unused) for k in ("rate", "samples")},
+        "thresholds": {"min_rate_ratio": GYRO_MIN_RATE_RATIO, "samples_per_parameter": GYRO_SAMPLES_PER_PARAMETER},
+        "longest_gyro_gap_s": max(c.longest_gap_s for c in cov),
         "not_used": [{"rows": [c.start, c.stop - 1], "criterion": c.criterion, "value": c.value,
-                      "threshold": c.threshold, "reason": c.reason} for c in unused[:SUMMARY_GYRO_SEGMENTS]],
+                      "threshold": c.threshold, "longest_gap_s": c.longest_gap_s, "reason": c.reason}
+                     for c in unused[:SUMMARY_GYRO_SEGMENTS]],
     }
 
 

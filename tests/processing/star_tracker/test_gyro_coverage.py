@@ -13,8 +13,8 @@ NS = 10**9
 T_ST = np.arange(1000, dtype=np.int64) * NS  # 1 Hz star tracker, 999 s
 
 
-def _cov(g_ns, harmonics=100, max_gap_s=120.0):
-    return segment_gyro_coverage(0, T_ST.size, T_ST, np.asarray(g_ns, dtype=np.int64), harmonics, max_gap_s)
+def _cov(g_ns, harmonics=100):
+    return segment_gyro_coverage(0, T_ST.size, T_ST, np.asarray(g_ns, dtype=np.int64), harmonics)
 
 
 def test_a_gyro_at_the_star_trackers_rate_is_used_up_to_two_samples_per_parameter():
@@ -28,21 +28,21 @@ def test_a_gyro_at_the_star_trackers_rate_is_used_up_to_two_samples_per_paramete
     assert "999 gyro samples for a series of" in over.reason
 
 
-def test_long_gaps_the_ends_included_and_slow_gyros_are_named_with_value_and_threshold():
+def test_slow_gyros_and_gaps_over_half_the_segment_are_named_with_value_threshold_and_longest_gap():
     g = T_ST + NS // 2
-    gap = _cov(g[(g < 300 * NS) | (g > 430 * NS)])
-    assert gap.criterion == "gap" and gap.value == 131.0 and gap.threshold == 120.0
-    assert abs(gap.longest_gap_at_s - 299.5) < 1e-9
-    assert "gyro gap of 131.0 s at +300 s > max_gap_s = 120 s" in gap.reason
-    assert _cov(g[(g < 300 * NS) | (g > 410 * NS)]).used  # 111 s: within max_gap_s
-    late = _cov(g[g > 150 * NS])  # the gyro starts 150.5 s after the star tracker
-    assert late.criterion == "gap" and late.value == 150.5 and late.longest_gap_at_s == 0.0
+    gap = _cov(g[(g < 300 * NS) | (g > 431 * NS)])
+    assert gap.used and gap.longest_gap_s == 132.0 and abs(gap.longest_gap_at_s - 299.5) < 1e-9  # used across it
+    half = _cov(g[(g < 200 * NS) | (g > 720 * NS)])
+    assert half.criterion == "rate" and abs(half.value - 479 / 1000) < 1e-9 and half.threshold == 0.5
+    assert "(ratio 0.479 < 0.5); longest gyro gap 521.0 s at +200 s" in half.reason
+    late = _cov(g[g > 600 * NS])  # the gyro starts 600.5 s after the star tracker
+    assert late.criterion == "rate" and late.longest_gap_s == 600.5 and late.longest_gap_at_s == 0.0
     slow = _cov(g[::3])
     assert slow.criterion == "rate" and abs(slow.value - 1 / 3) < 0.01 and slow.threshold == 0.5
-    assert "(ratio 0.333 < 0.5)" in slow.reason
+    assert "Hz, the star tracker at 1 Hz (ratio 0.333 < 0.5)" in slow.reason
     assert _cov(g[::2]).used  # half the star tracker's rate is enough
     nothing = _cov(np.zeros(0))
-    assert nothing.criterion == "gap" and nothing.value == 999.0
+    assert nothing.criterion == "rate" and nothing.value == 0.0 and nothing.longest_gap_s == 999.0
 
 
 def test_notes_count_the_criteria_and_name_a_few_segments():
