@@ -424,7 +424,8 @@ def analyze_star_tracker_accuracy(
     sig = pooled_sigmas(res, gyro is not None)
     w_B = res.w_S @ inp.dcm_BS.T
     if gyro is None:
-        notes.append("no gyro data: the residual std includes any real motion the series cannot follow")
+        notes.append(f"{'without the gyro' if coverage else 'no gyro data'}: the residual std includes any real motion "
+                     "the series cannot follow")
     report(0.7, "residuals")
     cmp = None if gyro is None else gyro_comparison(  # 5
         segments, [c.fit for c in corrected], gyro.fits, gyro.time_tai_ns, gyro.w_B_rad_s, inp.dcm_BS, sig.sigma,

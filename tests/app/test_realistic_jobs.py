@@ -159,7 +159,7 @@ def test_orbital_attitude_job_warns_of_late_gnss_tags_and_specs_judge_the_stated
 def test_star_tracker_accuracy_uses_the_1hz_gyro_at_the_harmonic_cap():
     from app.jobs.types import star_tracker_accuracy as sta
 
-    sc = scenario(duration_s=1200.0, seed=18, n_long_gaps=0, n_late_blocks=0, dropout_probability=0.13)
+    sc = scenario(duration_s=900.0, seed=18, n_long_gaps=0, n_late_blocks=0, dropout_probability=0.13)
     t, g = sc.streams["star_tracker"]["time_tai_ns"], sc.streams["gyro"]["time_tai_ns"]
     m = (t.size - 2) // 4  # the automatic M's cap, what the real day reached (M = 249 per segment)
     k = int(np.count_nonzero((g >= t[0]) & (g <= t[-1])))
