@@ -1,6 +1,6 @@
 """Command line: ``attitude serve``, ``attitude migrate``, ``attitude create-key`` on this machine;
 ``attitude spacecraft|upload|telemetry|jobs|schedules|reference ...`` against a running
-service (``--url``/``ATTITUDE_URL``, ``--token``/``ATTITUDE_TOKEN``; see app/cli_remote.py)."""
+service (``--url``/``ATTITUDE_URL``, ``--token``/``ATTITUDE_TOKEN``; see app/cli_remote/)."""
 
 from __future__ import annotations
 

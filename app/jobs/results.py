@@ -74,7 +74,7 @@ _DECLARED = (
              gyro_smoothing_sigma_arcsec_s=VEC, gyro_axes=STRS, n_outliers=INT, outlier_threshold_sigma=NUM,
              outlier_scale_arcsec=VEC, outliers=OBJS, sigma_ci95_arcsec=MAT, sigma_dof=VEC,
              sigma_above_cutoff_arcsec=VEC, sigma_lower_bound_arcsec=VEC, whiteness_p_value=VEC,
-             whiteness_power_ratio=VEC, residuals_white=BOOL, gyro_lines=OBJS, plausibility=OBJ),
+             whiteness_power_ratio=VEC, residuals_white=BOOL, gyro_lines=OBJS, plausibility=OBJ, gyro_coverage=OBJ),
     _summary("gyro_bias_fit", gyro_bias_rad_s=VEC, gyro_bias_sigma_rad_s=VEC, gyro_bias_sigma_constant_rad_s=VEC,
              gyro_bias_sigma_paper_rad_s=VEC, delta_sensor_arcsec_s=VEC, delta_sensor_sigma_arcsec_s=VEC,
              delta_sensor_sigma_paper_arcsec_s=VEC, delta_body_arcsec_s=VEC, delta_body_sigma_arcsec_s=VEC,

@@ -35,7 +35,9 @@ Method (003 = Avanesov et al., Keldysh Institute preprint 74, 2010):
    frequency (harmonics M over the same interval), constant offsets removed by matching the mean of
    the smoothed gyro to the mean of the star-tracker rates, rms difference per axis; the
    difference expected from the star-tracker noise (propagated through the fit's derivative) and
-   the gyro noise is reported beside it.
+   the gyro noise is reported beside it. A segment uses the gyro only when the gyro covers it at the
+   star tracker's rate (processing.star_tracker.gyro_coverage: rate, samples per parameter); the
+   notes name the failed criterion, its value and threshold for the others.
 6. Spectra (003 §1.5, processing.signal.spectral): amplitude spectra of the gyro rates, of the
    star-tracker rates and of the star-tracker residuals; lines above the smoother's cutoff
    M/(2T) detected with a false-alarm threshold, with the attitude amplitude A/(2 pi f), its rms
@@ -98,6 +100,7 @@ from processing.star_tracker.accuracy_residuals import (
     pool_residuals,
     pooled_sigmas,
 )
+from processing.star_tracker.gyro_coverage import GyroCoverage, coverage_notes, segment_gyro_coverage
 from processing.star_tracker.robust import OUTLIER_ALPHA, OutlierRejection, reject_outliers
 from processing.star_tracker.smoothing import (
     SegmentSmoothing,
@@ -150,6 +153,8 @@ class StarTrackerAccuracy:
     sigma_lower_bound_rad (3,) (>= sigma_rad; above it only when the test finds red noise);
     sigma_dof (3,) the dof of the interval (effective when correlated), sigma_ci95_rad (3, 2);
     line_coherence: each gyro line against the star tracker (removed or not).
+    gyro_coverage: per segment whether the gyro covers it and, if not, the failed criterion with its value
+    and threshold (processing.star_tracker.gyro_coverage; empty without gyro data).
     """
 
     time_tai_ns: NDArray
@@ -183,6 +188,7 @@ class StarTrackerAccuracy:
     lines: tuple[SpectralLine, ...]
     spectra: dict[str, Spectrum]
     notes: tuple[str, ...] = field(default=())
+    gyro_coverage: tuple[GyroCoverage, ...] = field(default=())
 
     @property
     def n_outliers(self) -> int:
@@ -399,13 +405,15 @@ def analyze_star_tracker_accuracy(
     segments, notes = smoothed.segments, list(smoothed.notes)
     report(0.3, "smoothing")
     cutoff_hz = max(seg.fit_raw.cutoff_hz for seg in segments)
-    gyro = None
+    gyro: GyroAnalysis | None = None
+    coverage: tuple[GyroCoverage, ...] = ()
     if gyro_time_tai_ns is not None and w_G_rad_s is not None:  # 5, 7
         g_ns, w_B_gyro = _gyro_rates(gyro_time_tai_ns, w_G_rad_s, q_BG)
-        gyro = analyze_gyro(segments, inp.t_ns, g_ns, w_B_gyro, inp.dcm_BS, cutoff_hz, inp.sample_period_s,
-                            line_false_alarm, smoothed.rejection.scale_rad)
-        if gyro is None:
-            notes.append("gyro data do not cover the star-tracker segments densely enough: not used")
+        coverage = tuple(segment_gyro_coverage(s.sl.start, s.sl.stop, inp.t_ns, g_ns, s.fit_raw.harmonics)
+                         for s in segments)
+        notes += coverage_notes(coverage)
+        gyro = analyze_gyro(segments, [c.idx if c.used else None for c in coverage], g_ns, w_B_gyro, inp.dcm_BS,
+                            cutoff_hz, inp.sample_period_s, line_false_alarm, smoothed.rejection.scale_rad)
     report(0.5, "gyro lines")
     motion = gyro.motion_S if gyro is not None else tuple(np.zeros((s.sl.stop - s.sl.start, 3)) for s in segments)
     corrected = tuple(correct_segment(seg, m) for seg, m in zip(segments, motion, strict=True))
@@ -416,12 +424,15 @@ def analyze_star_tracker_accuracy(
     sig = pooled_sigmas(res, gyro is not None)
     w_B = res.w_S @ inp.dcm_BS.T
     if gyro is None:
-        notes.append("no gyro data: the residual std includes any real motion the series cannot follow")
+        notes.append(f"{'without the gyro' if coverage else 'no gyro data'}: the residual std includes any real motion "
+                     "the series cannot follow")
     report(0.7, "residuals")
     cmp = None if gyro is None else gyro_comparison(  # 5
         segments, [c.fit for c in corrected], gyro.fits, gyro.time_tai_ns, gyro.w_B_rad_s, inp.dcm_BS, sig.sigma,
         gyro.lines.fits,
     )
+    if gyro is not None and cmp is None:
+        notes.append("gyro comparison left out: the final harmonic count needs more gyro samples than any segment has")
     spec = _spectra(inp, res, w_B, gyro, cmp, cutoff_hz, line_false_alarm)  # 6
     quality = _quality(inp, res, sig.sigma, spec.lines)  # 3b
     report(0.9, "spectra")
@@ -434,6 +445,6 @@ def analyze_star_tracker_accuracy(
         outlier_scale_rad=smoothed.rejection.scale_rad, whiteness=quality.whiteness,
         sigma_above_cutoff_rad=quality.above, sigma_lower_bound_rad=quality.lower, sigma_dof=quality.dof,
         sigma_ci95_rad=quality.ci95, line_coherence=gyro.coherence if gyro is not None else (),
-        segments=res.segments, sample_period_s=inp.sample_period_s, gyro=cmp,
+        segments=res.segments, sample_period_s=inp.sample_period_s, gyro=cmp, gyro_coverage=coverage,
         lines=(gyro.lines.lines if gyro is not None else ()) + spec.lines, spectra=spec.spectra, notes=tuple(notes),
     )

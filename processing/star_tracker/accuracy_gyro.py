@@ -38,6 +38,7 @@ from processing.signal.sine_series import SineSeriesSolver, fit_sine_series
 from processing.signal.sine_series_fit import SineSeriesFit
 from processing.signal.spectral import alias_frequency
 from processing.signal.spectral_lines import SinusoidFit, find_lines, fit_sinusoids, separable_frequencies
+from processing.star_tracker.gyro_coverage import enough_gyro_samples
 from processing.star_tracker.smoothing import SegmentSmoothing, rate_from_mrp, seconds_since, sensor_axis_residuals
 
 __all__ = [
@@ -306,23 +307,15 @@ class GyroAnalysis:
         return tuple(lf for lf, c in zip(self.lines.fits, self.coherence, strict=True) if c.removed)
 
 
-def _gyro_index(seg: SegmentSmoothing, t_ns: NDArray, g_ns: NDArray) -> NDArray | None:
-    """The gyro samples within the segment's span, or None if too few for its harmonics (4 (M + 2))."""
-    lo = np.searchsorted(g_ns, t_ns[seg.sl.start], side="left")
-    hi = np.searchsorted(g_ns, t_ns[seg.sl.stop - 1], side="right")
-    return np.arange(lo, hi) if hi - lo >= 4 * (seg.fit_raw.harmonics + 2) else None
-
-
 def analyze_gyro(
-    segments: Sequence[SegmentSmoothing], t_ns: NDArray, g_ns: NDArray, w_B: NDArray, dcm_BS: NDArray,
-    cutoff_hz: float, sample_period_s: float, false_alarm: float, scale_S: NDArray | None = None,
+    segments: Sequence[SegmentSmoothing], index: Sequence[NDArray | None], g_ns: NDArray, w_B: NDArray,
+    dcm_BS: NDArray, cutoff_hz: float, sample_period_s: float, false_alarm: float, scale_S: NDArray | None = None,
 ) -> GyroAnalysis | None:
-    """Steps 5 and 7 for the star-tracker segments (times t_ns (N,)) and gyro rates w_B (K, 3) at g_ns (K,):
-    smoothing per segment, lines above cutoff_hz, the attitude oscillation per segment of the lines
-    coherent with the star tracker (scale_S (3,) rad: its noise scale per sensor axis for the coherence
-    regression; None: every line removed, no test). None when the gyro samples cover no segment densely
-    enough."""
-    index = [_gyro_index(seg, t_ns, g_ns) for seg in segments]
+    """Steps 5 and 7 for the star-tracker segments and gyro rates w_B (K, 3) at g_ns (K,): smoothing per
+    segment, lines above cutoff_hz, the attitude oscillation per segment of the lines coherent with the
+    star tracker (scale_S (3,) rad: its noise scale per sensor axis for the coherence regression; None:
+    every line removed, no test). index: per segment the gyro samples to use, None where the gyro does not
+    cover it (processing.star_tracker.gyro_coverage). None when it covers no segment."""
     if all(idx is None for idx in index):
         return None
     fits = tuple(None if idx is None else fit_gyro_segment(seg, idx, g_ns, w_B, seg.fit_raw)
@@ -390,17 +383,22 @@ def gyro_comparison(
     dcm_BS: NDArray,
     sigma_S: NDArray,
     line_fits: Sequence[SinusoidFit],
-) -> GyroComparison:
+) -> GyroComparison | None:
     """Step 5 (003 §1.4): smoothed gyro (the cutoff of each segment's final fit ``fits``) against the
     star-tracker rates, offsets matched. The gyro fits of step 7 are reused when the harmonic count is
-    the same; segments without gyro samples (None) are left out."""
+    the same; segments without gyro samples (None) or with too few for the final harmonic count are left
+    out (None when that leaves none)."""
     parts = []
     for seg, fit, gf in zip(segments, fits, gyro_fits, strict=True):
         if gf is None:
             continue
         if gyro_harmonics(fit.harmonics, fit.span_s, gf.t_s) != gf.harmonics:
+            if not enough_gyro_samples(gf.idx.size, gyro_harmonics(fit.harmonics, fit.span_s, gf.t_s)):
+                continue  # the final M needs more gyro samples than the segment has (criterion ``samples``)
             gf = fit_gyro_segment(seg, gf.idx, g_ns, w_B_gyro, fit)
         parts.append(_compare_segment(seg, fit, gf, g_ns, dcm_BS, sigma_S, line_fits))
+    if not parts:
+        return None
     rss_s, rss_n = np.zeros(3), np.zeros(3)
     for p in parts:
         rss_s += p.rss_smoothing

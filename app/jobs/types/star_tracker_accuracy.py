@@ -25,6 +25,7 @@ from processing.star_tracker.accuracy import (
     StarTrackerAccuracyError,
     analyze_star_tracker_accuracy,
 )
+from processing.star_tracker.gyro_coverage import GYRO_MIN_RATE_RATIO, GYRO_SAMPLES_PER_PARAMETER
 from processing.star_tracker.multi_head import MultiHeadSettings
 from processing.tasks import Progress, ResultWarning, TaskError, TaskInputs, TaskResult
 from processing.units import ARCSEC_PER_RAD
@@ -33,6 +34,8 @@ MAX_GYRO_TABLE_ROWS = 20_000
 """The gyro comparison table is decimated (every k-th sample) to at most this many rows."""
 SUMMARY_OUTLIERS = 5
 """The summary lists at most this many outliers (the largest); the ``outliers`` table has them all."""
+SUMMARY_GYRO_SEGMENTS = 5
+"""gyro_coverage.not_used lists at most this many segments without gyro (n_failed counts them all)."""
 
 
 class Params(BaseModel):
@@ -124,6 +127,8 @@ def _summary(r: StarTrackerAccuracy, sensor: str, params: Params, gyro_used: boo
         "spectral_lines": [_line_entry(line) for line in r.lines],
     }
     summary.update(_robustness_summary(r))
+    if r.gyro_coverage:
+        summary["gyro_coverage"] = _coverage_summary(r)
     if r.gyro is not None:
         g = r.gyro
         summary.update(
@@ -135,6 +140,23 @@ def _summary(r: StarTrackerAccuracy, sensor: str, params: Params, gyro_used: boo
             gyro_axes=["y1", "y2", "y3"],
         )
     return summary
+
+
+def _coverage_summary(r: StarTrackerAccuracy) -> dict[str, Any]:
+    """Segments with and without gyro, the failed criteria counted, their thresholds, the first few
+    segments without gyro with the measured value (processing.star_tracker.gyro_coverage)."""
+    cov = r.gyro_coverage
+    unused = [c for c in cov if not c.used]
+    return {
+        "n_segments": len(cov),
+        "n_used": len(cov) - len(unused),
+        "n_failed": {k: sum(c.criterion == k for c in unused) for k in ("rate", "samples")},
+        "thresholds": {"min_rate_ratio": GYRO_MIN_RATE_RATIO, "samples_per_parameter": GYRO_SAMPLES_PER_PARAMETER},
+        "longest_gyro_gap_s": max(c.longest_gap_s for c in cov),
+        "not_used": [{"rows": [c.start, c.stop - 1], "criterion": c.criterion, "value": c.value,
+                      "threshold": c.threshold, "longest_gap_s": c.longest_gap_s, "reason": c.reason}
+                     for c in unused[:SUMMARY_GYRO_SEGMENTS]],
+    }
 
 
 def _outlier_rows(r: StarTrackerAccuracy) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
