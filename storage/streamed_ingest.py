@@ -68,10 +68,11 @@ class StreamedIngest:
             if kind is not None:
                 self.session.rollback()
                 self._staged.abort()
+                self.session.info.pop("written_files", None)
         finally:
             self._stack.close()
 
-    def _check_follows(self, table: pa.Table) -> None:
+    def check_follows(self, table: pa.Table) -> None:
         """OutOfOrder unless every identity group of ``table`` starts after its end in earlier batches."""
         groups = [k for k in self.spec.key_columns if k != TIME_COLUMN]
         times = table.column(TIME_COLUMN)
@@ -95,20 +96,21 @@ class StreamedIngest:
         """One validated batch (canonical, sorted by identity); ``row_index``: upload row of each row."""
         if table.num_rows == 0:
             return
-        self._check_follows(table)
+        self.check_follows(table)
         times = table.column(TIME_COLUMN).to_numpy()
         lo, hi = int(times.min()), int(times.max())
         day = np.floor_divide(times, NS_PER_DAY)
         steps = day[1:] != day[:-1]
         monotonic = bool(np.all(day[1:] >= day[:-1]))  # one group: no sort needed to find its days
         self.days.update((day[np.concatenate([[True], steps])] if monotonic else np.unique(day)).tolist())
-        if len(self.days) > self.max_days:
-            raise TooManyDays(f"the rows fall on more than {self.max_days} different days; at most "
-                              f"{self.max_days} days per upload (ATTITUDE_MAX_UPLOAD_DAYS): split the upload")
+        if len(self.days) > self.max_days:  # refused at the commit (after every batch was validated, as a
+            self._staged.abort()             # whole upload would be, and with the count); nothing more written
         self.rows += table.num_rows
         self.t0 = lo if self.t0 is None else min(self.t0, lo)
         self.t1 = hi if self.t1 is None else max(self.t1, hi)
         self.sensors.update(table.column("sensor").unique().to_pylist())
+        if len(self.days) > self.max_days:
+            return
         new_mask = np.ones(table.num_rows, dtype=bool)
         files = _files_in_window(self.session, self.spacecraft_id, self.spec.name, lo, hi)
         stored = _read_files(self.session, self.store, files, lo, hi) if files else []
@@ -126,6 +128,9 @@ class StreamedIngest:
     def commit(self, meta: IngestMeta) -> Ingest:
         """Publish the staged files and commit the ingest with its file rows; ConflictError (nothing
         stored) when any batch differed from stored samples."""
+        if len(self.days) > self.max_days:
+            raise TooManyDays(f"the rows fall on {len(self.days)} different days; at most {self.max_days} days per "
+                              "upload (ATTITUDE_MAX_UPLOAD_DAYS): split the upload")
         if self.n_conflicts:
             raise ConflictError(self.conflicts, self.n_conflicts)
         if self.t0 is None or self.t1 is None:
@@ -139,10 +144,13 @@ class StreamedIngest:
         )
         self.session.add(record)
         self.session.flush()
-        for w in self._staged.publish(record.id):
+        written = self._staged.publish(record.id)  # removed again by __exit__ if the commit fails
+        self.session.info.setdefault("written_files", []).extend(w.path for w in written)
+        for w in written:
             self.session.add(TelemetryFile(
                 ingest_id=record.id, spacecraft_id=self.spacecraft_id, stream=self.spec.name, day=w.day,
                 path=w.path, rows=w.rows, t_min_tai_ns=w.t_min_tai_ns, t_max_tai_ns=w.t_max_tai_ns,
                 sensors=",".join(w.sensors)))
         self.session.commit()
+        self.session.info.pop("written_files", None)
         return record

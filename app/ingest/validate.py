@@ -29,6 +29,9 @@ ZONED_TIME = r"\d{2}:\d{2}:\d{2}(?:[.,]\d+)?\s*(?:[Zz]|[+-]\d{2}(?::?\d{2})?)\s*
 UTC_ZONES = ("UTC", "utc", "Z", "+00:00", "Etc/UTC")
 QUATERNION_ALIASES = {"qw": "q0", "qx": "q1", "qy": "q2", "qz": "q3"}
 DIRECTIONS = ("sensor_to_inertial", "inertial_to_sensor")
+SAME_TIME = "same time as an earlier row of the same sensor"
+BACKWARDS = "time goes backwards (times must increase per sensor)"
+ORDER_ERRORS = (SAME_TIME, BACKWARDS)
 
 
 @dataclass(frozen=True)
@@ -300,8 +303,8 @@ def _check_order(times: np.ndarray, groups: np.ndarray | None, errors: _Errors) 
     t = times[order]
     equal = same_group & (t[1:] == t[:-1])
     back = same_group & (t[1:] < t[:-1])
-    errors.add_rows(order[1:][equal], "time", "same time as an earlier row of the same sensor")
-    errors.add_rows(order[1:][back], "time", "time goes backwards (times must increase per sensor)")
+    errors.add_rows(order[1:][equal], "time", SAME_TIME)
+    errors.add_rows(order[1:][back], "time", BACKWARDS)
 
 
 def _exact_times(table: pa.Table, mapping: dict[str, str], scale: str, errors: _Errors) -> np.ndarray:

@@ -17,7 +17,7 @@ from app.ingest.errors import MAX_REPORTED, RowError, UploadError
 from app.ingest.formats import Decoder, decoders
 from app.ingest.parse import DecodeLimits, LimitExceeded, UnsupportedMediaType, parse_body
 from app.ingest.spool import Body
-from app.ingest.validate import SensorPolicy, UploadOptions, validate
+from app.ingest.validate import ORDER_ERRORS, SensorPolicy, UploadOptions, validate
 from app.services.access import Principal
 from app.services.errors import NotFound, TooLarge, Unsupported
 from app.services.pages import Page, page_of, paginate
@@ -124,10 +124,11 @@ def ingest_upload(session: Session, store: ParquetStore, sc: Spacecraft, spec: S
                 return _ingest_streamed(session, store, sc, spec, body, content_type, opts, meta, config, limits,
                                         max_days, batch_rows), opts.notes
             except OutOfOrder:
-                # Not in time order per sensor/key group across batches (or a duplicate across a batch
-                # boundary): nothing was stored; the upload is ingested whole instead, where sorting and
-                # the within-upload duplicate check see every row. Still bounded by max_upload_rows.
-                log.info("upload to %s/%s not in time order across batches: ingested whole", sc.name, spec.name)
+                # Times must increase per sensor/key group in upload order, so a valid upload always
+                # streams; this one goes back or repeats a time (within a batch or across batches):
+                # nothing was stored, and the upload is validated whole instead, so that its 422 lists
+                # every such row exactly as for any upload. Still bounded by max_upload_rows.
+                log.info("upload to %s/%s: times go back or repeat; validated whole", sc.name, spec.name)
                 table = parse_body(body.read(), content_type, limits)
         else:
             table, opts = _decode(body.read(), content_type, spec, fmt, opts, limits)
@@ -158,7 +159,8 @@ def _ingest_streamed(session: Session, store: ParquetStore, sc: Spacecraft, spec
     """Each batch is validated and handed to a :class:`StreamedIngest` (de-duplicated against the stored
     samples of its span, written into staged files); an invalid row in any batch, also the last, rejects the
     upload (422 with the rows of the original upload; the batches after it are still checked so that every
-    error is reported, nothing more is written) and the staged files are removed. OutOfOrder: see caller."""
+    error is reported, nothing more is written) and the staged files are removed. Times that go back or repeat
+    (within a batch or across batches) raise OutOfOrder: see the caller."""
     policy = sensor_policy(spec, config)
     errors: list[RowError] = []
     n_errors = rows = 0
@@ -169,12 +171,16 @@ def _ingest_streamed(session: Session, store: ParquetStore, sc: Spacecraft, spec
                 try:
                     checked = validate(batch, spec, policy, opts)
                 except UploadError as exc:
+                    if any(e.message in ORDER_ERRORS for e in exc.errors):
+                        raise OutOfOrder("times go back within a batch") from None
                     errors += _shifted(exc, first)[:MAX_REPORTED - len(errors)]
                     n_errors += exc.total
                     if any(e.row is None for e in exc.errors):
                         break  # a problem of the whole upload (columns, options): every batch has it
                     continue
-                if not n_errors:
+                if n_errors:
+                    sink.check_follows(checked.table)  # only checked: nothing more is written
+                else:
                     sink.add(checked.table, checked.row_index + first)
             if n_errors:
                 raise UploadError(errors, n_errors)
