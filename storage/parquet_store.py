@@ -320,7 +320,11 @@ class StagedFiles:
                 directories.add((self.store.root / rel).parent)
             else:
                 part.handle.seek(0)
-                self.store.location.write_bytes(rel, part.handle.read())
+                try:
+                    self.store.location.write_bytes(rel, part.handle.read())  # one upload: whole or absent
+                except BaseException:
+                    self.store.location.delete(rel)
+                    raise
                 part.handle.close()
             self._published.append(rel)
             written.append(WrittenFile(path=rel, day=day, rows=part.rows, t_min_tai_ns=part.t_min,
