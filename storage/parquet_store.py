@@ -18,7 +18,9 @@ from __future__ import annotations
 import datetime as dt
 import errno
 import os
+import queue
 import tempfile
+import threading
 import time
 import uuid
 from collections.abc import Iterable
@@ -38,6 +40,7 @@ from storage.fs import Location, resolve
 EPOCH_DATE = dt.date(1970, 1, 1)
 TMP_PREFIX = ".tmp-"
 NO_SPACE = (errno.ENOSPC, errno.EDQUOT)
+WRITE_QUEUE = 2  # validated batches waiting for the writer thread of a staged upload
 MAX_OPEN_DAYS = 16  # staged day files open at once; an older one is closed and a later row of its day opens a part
 
 
@@ -241,11 +244,42 @@ class StagedFiles:
         self._closed: list[_Part] = []
         self._parts_per_day: dict[int, int] = {}
         self._published: list[str] = []
+        self._queue: queue.Queue[pa.Table | None] = queue.Queue(maxsize=WRITE_QUEUE)
+        self._thread: threading.Thread | None = None
+        self._failure: BaseException | None = None
 
     def append(self, table: pa.Table) -> None:
-        """Write ``table`` (rows of :func:`arrow_schema`, any order of days)."""
+        """Write ``table`` (rows of :func:`arrow_schema`, any order of days) in the background: a writer
+        thread encodes it while the caller decodes and validates the next batch (at most
+        :data:`WRITE_QUEUE` batches wait). A failure of the writer is raised by the next call."""
         if table.num_rows == 0:
             return
+        self._raise_failure()
+        if self._thread is None:
+            self._thread = threading.Thread(target=self._run, name="staged-parquet-writer", daemon=True)
+            self._thread.start()
+        self._queue.put(table)
+
+    def _run(self) -> None:
+        while (table := self._queue.get()) is not None:
+            if self._failure is None:
+                try:
+                    self._append_now(table)
+                except BaseException as exc:  # noqa: BLE001 (handed to the caller's thread)
+                    self._failure = exc
+
+    def _raise_failure(self) -> None:
+        if self._failure is not None:
+            raise self._failure
+
+    def _drain(self) -> None:
+        """Wait until every queued batch is written."""
+        if self._thread is not None:
+            self._queue.put(None)
+            self._thread.join()
+            self._thread = None
+
+    def _append_now(self, table: pa.Table) -> None:
         try:
             day_index = np.floor_divide(table.column(TIME_COLUMN).to_numpy(), NS_PER_DAY)
             if bool(np.all(day_index[1:] >= day_index[:-1])):
@@ -305,6 +339,8 @@ class StagedFiles:
     def publish(self, ingest_id: str) -> list[WrittenFile]:
         """Finish every part and move it to its final name; the caller commits the catalog rows (or removes
         the returned files again with :meth:`abort`)."""
+        self._drain()
+        self._raise_failure()
         while self._open:
             self._finish(self._open.pop(next(iter(self._open))))
         written = []
@@ -335,6 +371,7 @@ class StagedFiles:
 
     def abort(self) -> None:
         """Remove every staged and published file of this writer."""
+        self._drain()
         for part in [*self._open.values(), *self._closed]:
             try:
                 if part.writer is not None:

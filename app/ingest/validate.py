@@ -240,9 +240,13 @@ class _Sensors:
     names: list[str]
 
     def arrow(self) -> pa.Array:
-        dictionary = pa.DictionaryArray.from_arrays(pa.array(self.codes, pa.int32()),
-                                                    pa.array(self.names, pa.string()))
-        return dictionary.cast(pa.string())
+        n = len(self.codes)
+        if len(self.names) == 1 and n:  # one sensor (the usual case): the string array built from its buffers
+            name = self.names[0].encode()
+            offsets = np.arange(n + 1, dtype=np.int64) * len(name)
+            if offsets[-1] < 2**31:
+                return pa.StringArray.from_buffers(n, pa.py_buffer(offsets.astype(np.int32)), pa.py_buffer(name * n))
+        return pa.array(self.names, pa.string()).take(pa.array(self.codes, pa.int32()))
 
 
 def _sensors(table: pa.Table, mapping: dict[str, str], policy: SensorPolicy, opts: UploadOptions,
@@ -294,12 +298,15 @@ def _group_codes(sensors: _Sensors, columns: dict[str, np.ndarray], spec: Stream
 
 def _check_order(times: np.ndarray, groups: np.ndarray | None, errors: _Errors) -> None:
     """Within each identity group (sensor + extra key columns) times must strictly increase."""
-    if groups is None:
-        order = np.arange(len(times))
-        same_group = np.ones(len(times) - 1, dtype=bool)
-    else:
-        order = np.argsort(groups, kind="stable")
-        same_group = groups[order][1:] == groups[order][:-1]
+    if groups is None:  # one group: rows in upload order
+        equal = times[1:] == times[:-1]
+        back = times[1:] < times[:-1]
+        if equal.any() or back.any():
+            errors.add_rows(np.flatnonzero(equal) + 1, "time", SAME_TIME)
+            errors.add_rows(np.flatnonzero(back) + 1, "time", BACKWARDS)
+        return
+    order = np.argsort(groups, kind="stable")
+    same_group = groups[order][1:] == groups[order][:-1]
     t = times[order]
     equal = same_group & (t[1:] == t[:-1])
     back = same_group & (t[1:] < t[:-1])
