@@ -341,6 +341,14 @@ class StagedFiles:
         the returned files again with :meth:`abort`)."""
         self._drain()
         self._raise_failure()
+        try:
+            return self._publish_parts(ingest_id)
+        except OSError as exc:
+            if exc.errno in NO_SPACE:
+                raise StorageFullError(f"the telemetry store is full ({exc.strerror}); nothing was stored") from exc
+            raise
+
+    def _publish_parts(self, ingest_id: str) -> list[WrittenFile]:
         while self._open:
             self._finish(self._open.pop(next(iter(self._open))))
         written = []
