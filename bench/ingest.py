@@ -1,7 +1,8 @@
 """Ingest benchmark (issues 2, 24): gyro rows as Parquet through the running HTTP server, against a plain
 ``pyarrow.parquet.write_table`` of the same table in the same run, and the server's peak memory.
 
-Run: ``make bench`` (or ``.venv/bin/python bench/ingest.py [--rows N] [--repeat K] [--py-spy OUT]``).
+Run: ``make bench`` (or ``.venv/bin/python bench/ingest.py [--rows N] [--repeat K] [--format csv] [--py-spy OUT]``).
+``--format csv`` uploads the same table as CSV (the baseline stays the plain Parquet write of the table).
 Targets: >= 500,000 rows/s end to end and >= 0.3 of the plain pyarrow write (issue 24: 1e7 rows within
 3x of the plain write, i.e. ratio >= 0.33); the server's peak RSS (VmHWM of the server process, read
 from /proc after the uploads; Linux) under 2x the body size. ``--py-spy OUT`` records a py-spy profile
@@ -25,11 +26,13 @@ from pathlib import Path
 
 import numpy as np
 import pyarrow as pa
+import pyarrow.csv as pacsv
 import pyarrow.parquet as pq
 
 from app.devserver import running_server
 
 TOKEN = "bench-admin-token"
+MEDIA = {"parquet": "application/vnd.apache.parquet", "csv": "text/csv"}
 
 
 def gyro_table(n: int, t0_s: float, seed: int = 0) -> pa.Table:
@@ -78,6 +81,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--rows", type=int, default=1_000_000)
     ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--format", choices=sorted(MEDIA), default="parquet", help="upload body format")
     ap.add_argument("--py-spy", dest="py_spy", metavar="OUT", help="record a py-spy profile of the server")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
@@ -100,7 +104,11 @@ def main() -> None:
                 # a fresh time range each round so every row is new (no duplicate short-cut)
                 table = gyro_table(args.rows, 1.7e9 + k * args.rows * 0.1 + k * 86_400, seed=k)
                 buf = io.BytesIO()
-                pq.write_table(table, buf)
+                if args.format == "csv":  # times as seconds since 1970 (UTC), the values in full precision
+                    seconds = table.column("time").cast(pa.int64()).to_numpy() / 1e9
+                    pacsv.write_csv(table.set_column(0, "time", pa.array(seconds)), buf)
+                else:
+                    pq.write_table(table, buf)
                 payload = buf.getvalue()
 
                 t = time.perf_counter()
@@ -108,8 +116,7 @@ def main() -> None:
                 plain.append(time.perf_counter() - t)
 
                 t = time.perf_counter()
-                status, body = post(base, "/api/v1/spacecraft/bench/telemetry/gyro", payload,
-                                    "application/vnd.apache.parquet")
+                status, body = post(base, "/api/v1/spacecraft/bench/telemetry/gyro", payload, MEDIA[args.format])
                 service.append(time.perf_counter() - t)
                 assert status == 201 and body["inserted"] == args.rows, body
             peak = memory_mb(pid, "VmHWM")
@@ -117,7 +124,8 @@ def main() -> None:
                 spy.send_signal(2)  # SIGINT: py-spy writes its profile and exits
                 spy.wait(timeout=120)
             best_s, best_p = min(service), min(plain)
-            print(f"rows per upload: {args.rows:,}  payload: {len(payload) / 1e6:.1f} MB  rounds: {args.repeat}")
+            print(f"rows per upload: {args.rows:,}  payload ({args.format}): {len(payload) / 1e6:.1f} MB  "
+                  f"rounds: {args.repeat}")
             print(f"service end-to-end (HTTP upload, validate, de-duplicate, write, commit): "
                   f"best {best_s:.3f} s = {args.rows / best_s:,.0f} rows/s (median {np.median(service):.3f} s)")
             print(f"plain pyarrow.parquet.write_table of the same table:                     "

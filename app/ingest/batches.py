@@ -34,7 +34,8 @@ from app.ingest.parse import (
 )
 from app.ingest.spool import Body
 
-CSV_BYTES_PER_ROW = 64  # block size of the CSV reader = batch_rows x this (at least MIN_CSV_BLOCK)
+CSV_BYTES_PER_ROW = 16  # CSV reader block = batch_rows x this (at least MIN_CSV_BLOCK): its text and the
+# parsed string columns of a block in flight weigh several times the numbers of a batch
 MIN_CSV_BLOCK = 1 << 16
 MAX_HEADER_BYTES = 1 << 20
 

@@ -92,11 +92,11 @@ def _to_float(col: pa.ChunkedArray, name: str, errors: _Errors) -> np.ndarray:
         nulls = col.is_null().to_numpy(zero_copy_only=False)
         values = pc.cast(col, pa.float64()).to_numpy(zero_copy_only=False).astype(np.float64)
     elif pa.types.is_string(t) or pa.types.is_large_string(t):
-        raw = col.to_numpy(zero_copy_only=False)
         try:
             values = pc.cast(col, pa.float64()).to_numpy(zero_copy_only=False).astype(np.float64)
             nulls = np.zeros(len(values), dtype=bool)
-        except pa.ArrowInvalid:
+        except pa.ArrowInvalid:  # Python strings only for a column with a bad value (to name its rows)
+            raw = col.to_numpy(zero_copy_only=False)
             parsed = pd.to_numeric(pd.Series(raw, dtype=object), errors="coerce").to_numpy(np.float64)
             bad = np.isnan(parsed) & ~pd.Series(raw, dtype=object).str.strip().str.lower().isin(
                 ["nan", "+nan", "-nan"]).to_numpy()
@@ -162,10 +162,10 @@ def _times(col: pa.ChunkedArray, scale: str, errors: _Errors) -> np.ndarray:
             seconds = pc.cast(col, pa.float64()).to_numpy(zero_copy_only=False)
             return timescales.seconds_to_tai_ns(seconds, scale)
         if pa.types.is_string(t) or pa.types.is_large_string(t):
-            raw = col.to_numpy(zero_copy_only=False)
             try:  # numbers written as text (CSV): seconds since 1970 on the scale
                 seconds = pc.cast(col, pa.float64()).to_numpy(zero_copy_only=False)
             except pa.ArrowInvalid:
+                raw = col.to_numpy(zero_copy_only=False)
                 if scale != "utc" and _zoned_rows(col, scale, raw, errors):
                     return np.zeros(n, dtype=np.int64)
                 return timescales.iso_to_tai_ns(raw, scale)
