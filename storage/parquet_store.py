@@ -328,12 +328,15 @@ class StagedFiles:
         return _Part(day_index, number, tmp, handle, writer)
 
     def _finish(self, part: _Part) -> None:
-        """Close a part's writer and make its bytes durable (it stays staged)."""
+        """Close a part's writer (it stays staged; a local file is closed too, so an upload of many days holds
+        no more than MAX_OPEN_DAYS descriptors; made durable by :meth:`publish`, so a refused upload costs
+        no fsync)."""
         if part.writer is not None:
             part.writer.close()
             part.writer = None
             part.handle.flush()
-            os.fsync(part.handle.fileno())
+            if part.tmp is not None:
+                part.handle.close()
         self._closed.append(part)
 
     def publish(self, ingest_id: str) -> list[WrittenFile]:
@@ -358,7 +361,11 @@ class StagedFiles:
             name = f"{ingest_id}.parquet" if part.number == 0 else f"{ingest_id}-{part.number}.parquet"
             rel = f"{self.store._rel_dir(self.spacecraft_id, self.stream, day)}/{name}"
             if part.tmp is not None:
-                part.handle.close()
+                fd = os.open(part.tmp, os.O_RDONLY)
+                try:
+                    os.fsync(fd)
+                finally:
+                    os.close(fd)
                 os.replace(part.tmp, self.store.root / rel)
                 part.tmp = None
                 directories.add((self.store.root / rel).parent)

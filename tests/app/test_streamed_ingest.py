@@ -5,6 +5,7 @@ format) is checked across batch boundaries. One service for the module (SQLite),
 
 from __future__ import annotations
 
+import errno
 import io
 import itertools
 import sqlite3
@@ -32,6 +33,7 @@ BATCH = 100
 N = 2_500  # 25 batches
 T0_S = 1_700_000_000  # UTC seconds; 100 s apart: the rows span 3 TAI days
 STEP_S = 100
+MAX_DAYS = 20
 _names = (f"sc{i}" for i in itertools.count())
 
 
@@ -39,7 +41,8 @@ _names = (f"sc{i}" for i in itertools.count())
 def service(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[TestClient, Settings]]:
     root = tmp_path_factory.mktemp("streamed")
     settings = Settings(data_dir=root / "data", database_url=f"sqlite:///{root / 'catalog.db'}",
-                        bootstrap_token=ADMIN_TOKEN, auth_failures_per_minute=100_000, ingest_batch_rows=BATCH)
+                        bootstrap_token=ADMIN_TOKEN, auth_failures_per_minute=100_000, ingest_batch_rows=BATCH,
+                        max_upload_days=MAX_DAYS)
     with TestClient(create_app(settings)) as c:
         c.headers["Authorization"] = f"Bearer {ADMIN_TOKEN}"
         yield c, settings
@@ -245,3 +248,32 @@ def test_every_format_goes_through_the_batches(service, sc, encode, headers):
 
 def test_the_batch_size_is_a_setting() -> None:
     assert Settings.from_env({"ATTITUDE_INGEST_BATCH_ROWS": "5000"}).ingest_batch_rows == 5000
+
+
+def test_the_day_cap_counts_every_batch_and_nothing_is_written_beyond_it(service, sc):
+    client, settings = service
+    days = 30  # 10 rows per day: the cap (20 days) is passed in the third batch
+    body = "time,wx,wy,wz\n" + "".join(f"{T0_S + 86_400 * d + 60 * i},1,2,3\n" for d in range(days) for i in range(10))
+    r = upload(client, "gyro", body, sc=sc)
+    assert r.status_code == 413 and f"{days} different days" in r.json()["detail"], r.text
+    assert sc_files(settings, sc, client) == []
+    assert client.get(f"/api/v1/spacecraft/{sc}/ingests").json() == []
+
+
+def test_a_write_failure_in_a_later_batch_stores_nothing(service, sc, monkeypatch):
+    client, settings = service
+    real = pq.ParquetWriter.write_table
+    calls = []
+
+    def fails_on_the_fifth(self, *args, **kwargs):
+        calls.append(1)
+        if len(calls) == 5:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return real(self, *args, **kwargs)
+
+    monkeypatch.setattr(pq.ParquetWriter, "write_table", fails_on_the_fifth)
+    r = upload(client, "gyro", as_csv(gyro()), sc=sc)
+    assert r.status_code == 507 and "full" in r.json()["detail"], r.text
+    assert len(calls) >= 5
+    assert sc_files(settings, sc, client) == []  # the staged files of the earlier batches are gone too
+    assert client.get(f"/api/v1/spacecraft/{sc}/ingests").json() == []
