@@ -36,6 +36,7 @@ class Settings:
     heartbeat_timeout_s: int = 60
     max_upload_rows: int = 20_000_000
     max_upload_days: int = 1000  # distinct TAI days (one Parquet file each) per upload
+    ingest_batch_rows: int = 1_000_000  # rows per decoded, validated and written batch of an upload
     max_read_rows: int = 20_000_000  # rows one telemetry read (GET) may return as Parquet (or read whole)
     stream_read_rows: int = 1_000_000  # CSV/JSON/Arrow reads of windows holding more are streamed in chunks
     rate_limit_per_minute: int = 1200
@@ -74,6 +75,7 @@ class Settings:
             heartbeat_timeout_s=_int_env(env, "ATTITUDE_JOB_HEARTBEAT_TIMEOUT_S", 60),
             max_upload_rows=_int_env(env, "ATTITUDE_MAX_UPLOAD_ROWS", 20_000_000),
             max_upload_days=_int_env(env, "ATTITUDE_MAX_UPLOAD_DAYS", 1000),
+            ingest_batch_rows=_int_env(env, "ATTITUDE_INGEST_BATCH_ROWS", 1_000_000),
             max_read_rows=_int_env(env, "ATTITUDE_MAX_READ_ROWS", 20_000_000),
             stream_read_rows=_int_env(env, "ATTITUDE_STREAM_READ_ROWS", 1_000_000),
             rate_limit_per_minute=_int_env(env, "ATTITUDE_RATE_LIMIT_PER_MINUTE", 1200),

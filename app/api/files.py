@@ -4,15 +4,18 @@ downloads of what the services hand out."""
 from __future__ import annotations
 
 import re
+from collections.abc import AsyncIterator
+from pathlib import Path
 
 from fastapi import HTTPException, Request, Response, status
 
 from app.ingest.inflate import GzipBodyError, GzipInflater, InflatedTooLarge
+from app.ingest.spool import Body, BodySpool
 from app.services.downloads import Download
 
 
-async def read_limited(request: Request, limit: int) -> bytes:
-    """The request body, refusing (413) more than ``limit`` bytes without reading it all.
+async def _body_parts(request: Request, limit: int) -> AsyncIterator[bytes]:
+    """The (inflated) request body in pieces, refusing (413) more than ``limit`` bytes without reading it all.
 
     ``Content-Encoding: gzip`` bodies are inflated as they arrive (every member; trailing bytes are a 422,
     :mod:`app.ingest.inflate`), and the inflated size is held to the same limit, so a small "gzip bomb"
@@ -27,7 +30,6 @@ async def read_limited(request: Request, limit: int) -> bytes:
         raise HTTPException(status.HTTP_415_UNSUPPORTED_MEDIA_TYPE,
                             f"Content-Encoding {encoding!r} is not supported; use gzip or none")
     inflater = GzipInflater(limit) if encoding == "gzip" else None
-    chunks: list[bytes] = []
     size = 0
     try:
         async for chunk in request.stream():
@@ -35,14 +37,33 @@ async def read_limited(request: Request, limit: int) -> bytes:
             size += sum(map(len, parts))
             if size > limit:
                 raise HTTPException(413, f"body exceeds the limit of {limit} bytes")
-            chunks.extend(parts)
+            for part in parts:
+                yield part
         if inflater is not None:
             inflater.close()
     except InflatedTooLarge as exc:
         raise HTTPException(413, str(exc)) from None
     except GzipBodyError as exc:
         raise HTTPException(422, str(exc)) from None
-    return b"".join(chunks)
+
+
+async def read_limited(request: Request, limit: int) -> bytes:
+    """The request body as bytes (limits and gzip as :func:`_body_parts`)."""
+    return b"".join([part async for part in _body_parts(request, limit)])
+
+
+async def spool_limited(request: Request, limit: int, directory: Path) -> Body:
+    """The request body in a temporary file in ``directory`` (limits and gzip as :func:`_body_parts`), its
+    SHA-256 and line ends counted while it arrives: an upload is never held in memory whole. The caller
+    closes the returned :class:`Body` (the file goes with it)."""
+    spool = BodySpool(directory)
+    try:
+        async for part in _body_parts(request, limit):
+            spool.write(part)
+        return spool.finish()
+    except BaseException:
+        spool.discard()
+        raise
 
 
 def upload_filename(request: Request, explicit: str | None) -> str | None:

@@ -29,6 +29,9 @@ ZONED_TIME = r"\d{2}:\d{2}:\d{2}(?:[.,]\d+)?\s*(?:[Zz]|[+-]\d{2}(?::?\d{2})?)\s*
 UTC_ZONES = ("UTC", "utc", "Z", "+00:00", "Etc/UTC")
 QUATERNION_ALIASES = {"qw": "q0", "qx": "q1", "qy": "q2", "qz": "q3"}
 DIRECTIONS = ("sensor_to_inertial", "inertial_to_sensor")
+SAME_TIME = "same time as an earlier row of the same sensor"
+BACKWARDS = "time goes backwards (times must increase per sensor)"
+ORDER_ERRORS = (SAME_TIME, BACKWARDS)
 
 
 @dataclass(frozen=True)
@@ -89,11 +92,11 @@ def _to_float(col: pa.ChunkedArray, name: str, errors: _Errors) -> np.ndarray:
         nulls = col.is_null().to_numpy(zero_copy_only=False)
         values = pc.cast(col, pa.float64()).to_numpy(zero_copy_only=False).astype(np.float64)
     elif pa.types.is_string(t) or pa.types.is_large_string(t):
-        raw = col.to_numpy(zero_copy_only=False)
         try:
             values = pc.cast(col, pa.float64()).to_numpy(zero_copy_only=False).astype(np.float64)
             nulls = np.zeros(len(values), dtype=bool)
-        except pa.ArrowInvalid:
+        except pa.ArrowInvalid:  # Python strings only for a column with a bad value (to name its rows)
+            raw = col.to_numpy(zero_copy_only=False)
             parsed = pd.to_numeric(pd.Series(raw, dtype=object), errors="coerce").to_numpy(np.float64)
             bad = np.isnan(parsed) & ~pd.Series(raw, dtype=object).str.strip().str.lower().isin(
                 ["nan", "+nan", "-nan"]).to_numpy()
@@ -159,10 +162,10 @@ def _times(col: pa.ChunkedArray, scale: str, errors: _Errors) -> np.ndarray:
             seconds = pc.cast(col, pa.float64()).to_numpy(zero_copy_only=False)
             return timescales.seconds_to_tai_ns(seconds, scale)
         if pa.types.is_string(t) or pa.types.is_large_string(t):
-            raw = col.to_numpy(zero_copy_only=False)
             try:  # numbers written as text (CSV): seconds since 1970 on the scale
                 seconds = pc.cast(col, pa.float64()).to_numpy(zero_copy_only=False)
             except pa.ArrowInvalid:
+                raw = col.to_numpy(zero_copy_only=False)
                 if scale != "utc" and _zoned_rows(col, scale, raw, errors):
                     return np.zeros(n, dtype=np.int64)
                 return timescales.iso_to_tai_ns(raw, scale)
@@ -237,9 +240,13 @@ class _Sensors:
     names: list[str]
 
     def arrow(self) -> pa.Array:
-        dictionary = pa.DictionaryArray.from_arrays(pa.array(self.codes, pa.int32()),
-                                                    pa.array(self.names, pa.string()))
-        return dictionary.cast(pa.string())
+        n = len(self.codes)
+        if len(self.names) == 1 and n:  # one sensor (the usual case): the string array built from its buffers
+            name = self.names[0].encode()
+            offsets = np.arange(n + 1, dtype=np.int64) * len(name)
+            if offsets[-1] < 2**31:
+                return pa.StringArray.from_buffers(n, pa.py_buffer(offsets.astype(np.int32)), pa.py_buffer(name * n))
+        return pa.array(self.names, pa.string()).take(pa.array(self.codes, pa.int32()))
 
 
 def _sensors(table: pa.Table, mapping: dict[str, str], policy: SensorPolicy, opts: UploadOptions,
@@ -291,17 +298,20 @@ def _group_codes(sensors: _Sensors, columns: dict[str, np.ndarray], spec: Stream
 
 def _check_order(times: np.ndarray, groups: np.ndarray | None, errors: _Errors) -> None:
     """Within each identity group (sensor + extra key columns) times must strictly increase."""
-    if groups is None:
-        order = np.arange(len(times))
-        same_group = np.ones(len(times) - 1, dtype=bool)
-    else:
-        order = np.argsort(groups, kind="stable")
-        same_group = groups[order][1:] == groups[order][:-1]
+    if groups is None:  # one group: rows in upload order
+        equal = times[1:] == times[:-1]
+        back = times[1:] < times[:-1]
+        if equal.any() or back.any():
+            errors.add_rows(np.flatnonzero(equal) + 1, "time", SAME_TIME)
+            errors.add_rows(np.flatnonzero(back) + 1, "time", BACKWARDS)
+        return
+    order = np.argsort(groups, kind="stable")
+    same_group = groups[order][1:] == groups[order][:-1]
     t = times[order]
     equal = same_group & (t[1:] == t[:-1])
     back = same_group & (t[1:] < t[:-1])
-    errors.add_rows(order[1:][equal], "time", "same time as an earlier row of the same sensor")
-    errors.add_rows(order[1:][back], "time", "time goes backwards (times must increase per sensor)")
+    errors.add_rows(order[1:][equal], "time", SAME_TIME)
+    errors.add_rows(order[1:][back], "time", BACKWARDS)
 
 
 def _exact_times(table: pa.Table, mapping: dict[str, str], scale: str, errors: _Errors) -> np.ndarray:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Iterator
 from dataclasses import replace
 from typing import Any
@@ -11,10 +12,12 @@ import pyarrow as pa
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
-from app.ingest.errors import RowError, UploadError
+from app.ingest.batches import iter_tables
+from app.ingest.errors import MAX_REPORTED, RowError, UploadError
 from app.ingest.formats import Decoder, decoders
 from app.ingest.parse import DecodeLimits, LimitExceeded, UnsupportedMediaType, parse_body
-from app.ingest.validate import SensorPolicy, UploadOptions, validate
+from app.ingest.spool import Body
+from app.ingest.validate import ORDER_ERRORS, SensorPolicy, UploadOptions, validate
 from app.services.access import Principal
 from app.services.errors import NotFound, TooLarge, Unsupported
 from app.services.pages import Page, page_of, paginate
@@ -24,6 +27,7 @@ from processing.streams import STREAMS, StreamSpec
 from processing.units import NS_PER_DAY
 from storage.models import Ingest, Spacecraft
 from storage.parquet_store import ParquetStore
+from storage.streamed_ingest import OutOfOrder, StreamedIngest, TooManyDays
 from storage.telemetry import (
     IngestMeta,
     TooManyRowsToRead,
@@ -34,6 +38,8 @@ from storage.telemetry import (
     window_rows,
 )
 
+log = logging.getLogger("attitude.ingest")
+DEFAULT_BATCH_ROWS = 1_000_000  # rows per decoded batch of an upload (ATTITUDE_INGEST_BATCH_ROWS)
 SINGLE_SENSOR_KINDS = {"gyro": "gyro", "magnetometer": "magnetometer", "sun_sensor": "sun_sensor"}
 
 
@@ -100,16 +106,32 @@ def _decode(body: bytes, content_type: str, spec: StreamSpec, fmt: str | None,
                                   sensor=opts.sensor or decoded.sensor, notes=tuple(decoded.notes))
 
 
-def ingest_upload(session: Session, store: ParquetStore, sc: Spacecraft, spec: StreamSpec, body: bytes,
+def ingest_upload(session: Session, store: ParquetStore, sc: Spacecraft, spec: StreamSpec, body: bytes | Body,
                   content_type: str, opts: UploadOptions, meta: IngestMeta, config: dict[str, Any],
-                  fmt: str | None, max_rows: int, max_days: int = 1000) -> tuple[Ingest, tuple[str, ...]]:
+                  fmt: str | None, max_rows: int, max_days: int = 1000,
+                  batch_rows: int = DEFAULT_BATCH_ROWS) -> tuple[Ingest, tuple[str, ...]]:
     """Decode, validate and store one upload; all or nothing (blocking: run it off the event loop).
 
-    Returns the ingest record and the notes of a file-format decoder. Raises UploadError (invalid rows),
-    Unsupported (media type), TooManyRows or storage.telemetry.ConflictError (rows differ from stored
-    samples); nothing is stored then."""
+    Tables (CSV, Parquet, Arrow, JSON) are decoded, validated and written in batches of ``batch_rows``
+    (:func:`_ingest_streamed`); a file format (``fmt``) is decoded whole. Returns the ingest record and the
+    notes of a file-format decoder. Raises UploadError (invalid rows), Unsupported (media type),
+    TooManyRows or storage.telemetry.ConflictError (rows differ from stored samples); nothing is stored then."""
+    body = Body.from_bytes(body) if isinstance(body, bytes) else body
+    limits = DecodeLimits(max_rows=max_rows)
     try:
-        table, opts = _decode(body, content_type, spec, fmt, opts, DecodeLimits(max_rows=max_rows))
+        if fmt is None or fmt == "table":
+            try:
+                return _ingest_streamed(session, store, sc, spec, body, content_type, opts, meta, config, limits,
+                                        max_days, batch_rows), opts.notes
+            except OutOfOrder:
+                # Times must increase per sensor/key group in upload order, so a valid upload always
+                # streams; this one goes back or repeats a time (within a batch or across batches):
+                # nothing was stored, and the upload is validated whole instead, so that its 422 lists
+                # every such row exactly as for any upload. Still bounded by max_upload_rows.
+                log.info("upload to %s/%s: times go back or repeat; validated whole", sc.name, spec.name)
+                table = parse_body(body.read(), content_type, limits)
+        else:
+            table, opts = _decode(body.read(), content_type, spec, fmt, opts, limits)
     except UnsupportedMediaType as exc:
         raise Unsupported(str(exc)) from None
     except LimitExceeded as exc:
@@ -117,12 +139,56 @@ def ingest_upload(session: Session, store: ParquetStore, sc: Spacecraft, spec: S
     if table.num_rows > max_rows:
         raise TooManyRows(f"{table.num_rows} rows exceed the limit of {max_rows} rows per upload; split the upload")
     checked = validate(table, spec, sensor_policy(spec, config), opts)
-    days = np.unique(np.floor_divide(checked.table.column("time_tai_ns").to_numpy(), NS_PER_DAY)).size
+    del table
+    times = checked.table.column("time_tai_ns").to_numpy()
+    days = np.unique(np.floor_divide(times, NS_PER_DAY)).size
     if days > max_days:  # one Parquet file per TAI day: bound the files (and catalog rows) of one upload
         raise TooManyRows(f"the rows fall on {days} different days; at most {max_days} days per upload "
                           "(ATTITUDE_MAX_UPLOAD_DAYS): split the upload")
     record = commit_ingest(session, store, sc.id, spec, checked.table, checked.row_index, meta)
     return record, opts.notes  # notes: what a file-format decoder did (frames, units)
+
+
+def _shifted(exc: UploadError, first: int) -> list[RowError]:
+    return [e if e.row is None else RowError(e.row + first, e.column, e.message) for e in exc.errors]
+
+
+def _ingest_streamed(session: Session, store: ParquetStore, sc: Spacecraft, spec: StreamSpec, body: Body,
+                     content_type: str, opts: UploadOptions, meta: IngestMeta, config: dict[str, Any],
+                     limits: DecodeLimits, max_days: int, batch_rows: int) -> Ingest:
+    """Each batch is validated and handed to a :class:`StreamedIngest` (de-duplicated against the stored
+    samples of its span, written into staged files); an invalid row in any batch, also the last, rejects the
+    upload (422 with the rows of the original upload; the batches after it are still checked so that every
+    error is reported, nothing more is written) and the staged files are removed. Times that go back or repeat
+    (within a batch or across batches) raise OutOfOrder: see the caller."""
+    policy = sensor_policy(spec, config)
+    errors: list[RowError] = []
+    n_errors = rows = 0
+    try:
+        with StreamedIngest(session, store, sc.id, spec, max_days) as sink:
+            for first, batch in iter_tables(body, content_type, limits, batch_rows):
+                rows += batch.num_rows
+                try:
+                    checked = validate(batch, spec, policy, opts)
+                except UploadError as exc:
+                    if any(e.message in ORDER_ERRORS for e in exc.errors):
+                        raise OutOfOrder("times go back within a batch") from None
+                    errors += _shifted(exc, first)[:MAX_REPORTED - len(errors)]
+                    n_errors += exc.total
+                    if any(e.row is None for e in exc.errors):
+                        break  # a problem of the whole upload (columns, options): every batch has it
+                    continue
+                if n_errors:
+                    sink.check_follows(checked.table)  # only checked: nothing more is written
+                else:
+                    sink.add(checked.table, checked.row_index + first)
+            if n_errors:
+                raise UploadError(errors, n_errors)
+            if rows == 0:
+                raise UploadError([RowError(None, None, "the upload has no rows")])
+            return sink.commit(meta)
+    except TooManyDays as exc:
+        raise TooManyRows(str(exc)) from None
 
 
 def read(session: Session, store: ParquetStore, name: str, stream: str, who: Principal, start: str | None,

@@ -7,6 +7,7 @@ from __future__ import annotations
 import errno
 import time
 
+import pyarrow.parquet as pq
 import pytest
 from sqlalchemy import select
 
@@ -78,7 +79,7 @@ def test_disk_full_is_507_and_nothing_is_stored(client, settings, monkeypatch):
     def full(*args, **kwargs):
         raise OSError(errno.ENOSPC, "No space left on device")
 
-    monkeypatch.setattr(ParquetStore, "_publish", full)
+    monkeypatch.setattr(pq.ParquetWriter, "write_table", full)  # whole and streamed uploads write through it
     r = upload(client, "gyro", DAY1)
     assert r.status_code == 507 and "full" in r.json()["detail"]
     assert stored_files(settings) == []

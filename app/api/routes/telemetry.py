@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import datetime as dt
-import hashlib
 from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, Query, Request, Response, status
@@ -12,7 +11,7 @@ from fastapi.responses import JSONResponse, StreamingResponse
 from pydantic import BaseModel
 
 from app.api.deps import Operator, SessionDep, SettingsDep, StoreDep, Viewer
-from app.api.files import download_response, read_limited, upload_filename
+from app.api.files import download_response, spool_limited, upload_filename
 from app.api.pagination import MAX_LIMIT, announce_next
 from app.ingest.errors import UploadError
 from app.ingest.parse import SUPPORTED_TYPES
@@ -75,16 +74,16 @@ async def upload_telemetry(
     sc = get_spacecraft(session, name, who)
     config = latest_config(session, sc).config
     settings = request.app.state.settings
-    body = await read_limited(request, settings.max_upload_bytes)
+    # spooled to a temporary file as it arrives (checksum on the way), then decoded in batches
+    body = await spool_limited(request, settings.max_upload_bytes, settings.data_dir / "tmp")
     content_type = request.headers.get("content-type", "")
     meta = IngestMeta(filename=upload_filename(request, filename), content_type=content_type.split(";")[0][:100],
-                      size_bytes=len(body), checksum_sha256=hashlib.sha256(body).hexdigest(),
-                      time_scale=time_scale, api_key_id=who.key_id)
+                      size_bytes=body.size, checksum_sha256=body.sha256, time_scale=time_scale, api_key_id=who.key_id)
     opts = service.upload_options(config, time_scale, sensor, norm_tolerance, quaternion_direction)
     try:
         rec, notes = await run_in_threadpool(service.ingest_upload, session, store, sc, spec, body, content_type,
                                              opts, meta, config, format, settings.max_upload_rows,
-                                             settings.max_upload_days)
+                                             settings.max_upload_days, settings.ingest_batch_rows)
     except UploadError as exc:
         return JSONResponse(status_code=422, content={
             "detail": f"upload rejected, nothing stored: {exc}", "error_count": exc.total,
@@ -94,6 +93,8 @@ async def upload_telemetry(
             "detail": f"upload rejected, nothing stored: {exc.total} rows differ from stored samples "
                       "with the same identity (sensor, time)", "conflict_count": exc.total,
             "conflicts": exc.rows})
+    finally:
+        body.close()
     out = _ingest_out(rec)
     out.notes = list(notes)
     return out
