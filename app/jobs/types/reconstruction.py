@@ -240,7 +240,7 @@ def _bridge_gyro(raw: Mapping[str, NDArray[Any]], kept: Mapping[str, NDArray[Any
         rows = np.flatnonzero(sensor == name)
         rows = rows[np.argsort(t[rows], kind="stable")]
         acc_t = np.sort(kt[ks == name])
-        accepted = np.isin(t[rows], acc_t)
+        accepted = _in_sorted(t[rows], acc_t)
         keep[rows[accepted]] = True
         rej = rows[~accepted]
         if rej.size == 0 or acc_t.size < 2:
@@ -258,6 +258,14 @@ def _bridge_gyro(raw: Mapping[str, NDArray[Any]], kept: Mapping[str, NDArray[Any
     for c in values:
         out[c] = values[c][keep]
     return out, n_bridged
+
+
+def _in_sorted(x: NDArray[np.int64], sorted_values: NDArray[np.int64]) -> NDArray[np.bool_]:
+    """``np.isin(x, sorted_values)`` for a sorted right-hand side, by binary search (no sort of both)."""
+    if sorted_values.size == 0:
+        return np.zeros(x.shape, dtype=bool)
+    i = np.minimum(np.searchsorted(sorted_values, x), sorted_values.size - 1)
+    return np.asarray(sorted_values[i] == x)
 
 
 def correct_gyro_bias(gyro: Mapping[str, NDArray[Any]], bias_B: NDArray[np.float64],
