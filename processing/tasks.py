@@ -105,7 +105,10 @@ class TaskInputs:
         cols = self.streams.get(name)
         if cols is None or len(cols["time_tai_ns"]) == 0:
             return ()
-        return tuple(sorted(set(np.asarray(cols["sensor"]).astype(str).tolist())))
+        names = set(np.asarray(cols["sensor"]).tolist())
+        if not all(type(s) is str for s in names):  # bytes, numbers, numpy scalars: as their text
+            names = set(np.asarray(cols["sensor"]).astype(str).tolist())
+        return tuple(sorted(names))
 
     def _view(self, view: type[V], sensor: str | None) -> V:
         name = view.STREAM

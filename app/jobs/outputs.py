@@ -1,10 +1,21 @@
-"""Turn a TaskResult into stored artifacts: tables (Parquet + CSV), figures (PNG), summary (JSON)."""
+"""Turn a TaskResult into stored artifacts: tables (Parquet; CSV too when short), figures (PNG), summary (JSON).
+
+Bounded per job (issue 24): a table longer than :data:`CSV_STORED_MAX_ROWS` is stored as Parquet only, its CSV
+made on request from the Parquet (:func:`csv_chunks`, streamed by the artifact download route for the
+``<table>.csv`` name); a table is stored with at most :data:`TABLE_MAX_ROWS` rows; the artifacts of one job stay
+within :data:`JOB_ARTIFACT_MAX_BYTES` (a table, file or figure that would go beyond is left out). What was
+done is stated in the summary's ``outputs`` and in a note. Figures are drawn once, with every line of more than
+:data:`FIGURE_LINE_MAX_POINTS` points thinned for display first (:func:`thin_lines`: each pixel column's first,
+last, lowest and highest point kept, so the picture is the same and spikes stay).
+"""
 
 from __future__ import annotations
 
 import io
 import json
 import math
+from collections.abc import Iterator
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -12,10 +23,23 @@ import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.csv as pacsv
 import pyarrow.parquet as pq
+from numpy.typing import NDArray
 
 from processing.tasks import TaskResult
 from processing.time import timescales
 from storage.jobs import ArtifactStore, StoredArtifact
+
+CSV_STORED_MAX_ROWS = 50_000
+"""Tables of up to this many rows are stored as CSV too; longer ones as Parquet only (CSV on request)."""
+TABLE_MAX_ROWS = 5_000_000
+"""A table is stored with at most this many rows (its first ones); ``outputs.truncated`` names it."""
+JOB_ARTIFACT_MAX_BYTES = 256 * 2**20
+"""The artifacts of one job: a table, file or figure that would go beyond this is left out (``outputs.omitted``)."""
+FIGURE_LINE_MAX_POINTS = 4_000
+"""Lines with more points are thinned for display (about 2 points per pixel column of a 9-inch, 110-dpi figure)."""
+FIGURE_MARKERS_MAX_POINTS = 20_000
+"""Marker-only lines (scatter) with more points keep a regular subsample plus every column's extremes."""
+CSV_BATCH_ROWS = 65_536
 
 if TYPE_CHECKING:  # matplotlib is imported by the job types, not at start-up
     from matplotlib.figure import Figure
@@ -64,34 +88,170 @@ def table_to_arrow(columns: dict[str, Any]) -> pa.Table:
     """Columns -> Arrow; a ``time_tai_ns`` column gets an ISO UTC ``time`` column in front of it."""
     arrays: dict[str, Any] = {}
     if "time_tai_ns" in columns:
-        arrays["time"] = pa.array(timescales.tai_ns_to_iso(np.asarray(columns["time_tai_ns"], np.int64)))
+        arrays["time"] = iso_column(np.asarray(columns["time_tai_ns"], np.int64))
     for name, values in columns.items():
         arr = np.asarray(values)
         arrays[name] = pa.array(arr.tolist() if arr.dtype == object else arr)
     return pa.table(arrays)
 
 
+class _Budget:
+    """What one job may still store (JOB_ARTIFACT_MAX_BYTES) and what was left out or shortened."""
+
+    def __init__(self, limit: int) -> None:
+        self.left = limit
+        self.outputs: dict[str, Any] = {"parquet_only": [], "truncated": {}, "omitted": []}
+
+    def take(self, name: str, size: int) -> bool:
+        if size > self.left:
+            self.outputs["omitted"].append(name)
+            return False
+        self.left -= size
+        return True
+
+
+def iso_column(tai_ns: NDArray[np.int64]) -> pa.Array:
+    """ISO UTC times as an Arrow string column, built from the character codes without a Python string per
+    value (the same column as ``pa.array(timescales.tai_ns_to_iso(tai_ns))``)."""
+    codes = timescales.tai_ns_to_iso_codes(tai_ns)
+    n, width = codes.shape
+    if n * width >= 2**31 - 1:  # beyond 32-bit offsets
+        return pa.array(timescales.tai_ns_to_iso(tai_ns), pa.string())
+    offsets = np.arange(n + 1, dtype=np.int32) * np.int32(width)
+    return pa.StringArray.from_buffers(n, pa.py_buffer(offsets), pa.py_buffer(codes.astype(np.uint8)))
+
+
 def write_outputs(store: ArtifactStore, job_id: str, result: TaskResult,
                   figures: dict[str, Figure], summary: dict[str, Any]) -> list[StoredArtifact]:
+    """Store the job's tables, files, figures and summary (the summary first in the list).
+
+    When a table is stored as Parquet only, shortened or left out (see the module's bounds), ``summary`` gets
+    an ``outputs`` entry saying so (in place: the caller stores the same dict) and ``result.notes`` a note."""
+    budget = _Budget(JOB_ARTIFACT_MAX_BYTES)
     out: list[StoredArtifact] = []
-    out.append(store.write(job_id, "summary.json", json.dumps(summary, indent=2).encode(), kind="summary",
-                           media_type="application/json", description="job summary"))
     for name, columns in result.tables.items():
-        table = table_to_arrow(columns)
-        buf = io.BytesIO()
-        pq.write_table(table, buf)
-        out.append(store.write(job_id, f"{name}.parquet", buf.getvalue(), kind="table",
-                               media_type="application/vnd.apache.parquet", description=f"table {name}"))
-        buf = io.BytesIO()
-        pacsv.write_csv(csv_safe(table), buf)
-        out.append(store.write(job_id, f"{name}.csv", buf.getvalue(), kind="table", media_type="text/csv",
-                               description=f"table {name}"))
+        out += _write_table(store, job_id, name, columns, budget)
     for name, (content, media_type) in result.files.items():
-        out.append(store.write(job_id, name, content, kind="file", media_type=media_type,
-                               description=f"file {name}"))
+        if budget.take(name, len(content)):
+            out.append(store.write(job_id, name, content, kind="file", media_type=media_type,
+                                   description=f"file {name}"))
     for name, fig in figures.items():
         buf = io.BytesIO()
+        thin_lines(fig)
         fig.savefig(buf, format="png", dpi=110, bbox_inches="tight")
-        out.append(store.write(job_id, f"{name}.png", buf.getvalue(), kind="figure", media_type="image/png",
-                               description=str(fig.get_label() or name)))
+        if budget.take(f"{name}.png", buf.tell()):
+            out.append(store.write(job_id, f"{name}.png", buf.getvalue(), kind="figure", media_type="image/png",
+                                   description=str(fig.get_label() or name)))
+    outputs = {k: v for k, v in budget.outputs.items() if v}
+    if outputs:
+        outputs["limits"] = {"csv_stored_max_rows": CSV_STORED_MAX_ROWS, "table_max_rows": TABLE_MAX_ROWS,
+                             "job_artifact_max_bytes": JOB_ARTIFACT_MAX_BYTES}
+        summary["outputs"] = outputs
+        result.notes.extend(_output_notes(outputs))
+    head = store.write(job_id, "summary.json", json.dumps(summary, indent=2).encode(), kind="summary",
+                       media_type="application/json", description="job summary")
+    return [head, *out]
+
+
+def _write_table(store: ArtifactStore, job_id: str, name: str, columns: dict[str, Any],
+                 budget: _Budget) -> list[StoredArtifact]:
+    n_rows = len(next(iter(columns.values()))) if columns else 0
+    if n_rows > TABLE_MAX_ROWS:
+        columns = {k: np.asarray(v)[:TABLE_MAX_ROWS] for k, v in columns.items()}
+        budget.outputs["truncated"][name] = {"rows": n_rows, "stored_rows": TABLE_MAX_ROWS}
+    table = table_to_arrow(columns)
+    buf = io.BytesIO()
+    pq.write_table(table, buf)
+    if not budget.take(f"{name}.parquet", buf.tell()):
+        return []
+    out = [store.write(job_id, f"{name}.parquet", buf.getvalue(), kind="table",
+                       media_type="application/vnd.apache.parquet", description=f"table {name}")]
+    if table.num_rows > CSV_STORED_MAX_ROWS:
+        budget.outputs["parquet_only"].append(name)
+        return out
+    buf = io.BytesIO()
+    pacsv.write_csv(csv_safe(table), buf)
+    if budget.take(f"{name}.csv", buf.tell()):
+        out.append(store.write(job_id, f"{name}.csv", buf.getvalue(), kind="table", media_type="text/csv",
+                               description=f"table {name}"))
     return out
+
+
+def _output_notes(outputs: dict[str, Any]) -> list[str]:
+    notes = []
+    if outputs.get("parquet_only"):
+        notes.append(f"tables of more than {CSV_STORED_MAX_ROWS} rows stored as Parquet only (their CSV is made "
+                     f"on request, <table>.csv): {', '.join(outputs['parquet_only'])}")
+    for name, t in outputs.get("truncated", {}).items():
+        notes.append(f"table {name} truncated to its first {t['stored_rows']} of {t['rows']} rows")
+    if outputs.get("omitted"):
+        notes.append(f"left out to keep the job's artifacts within {JOB_ARTIFACT_MAX_BYTES // 2**20} MiB: "
+                     f"{', '.join(outputs['omitted'])}")
+    return notes
+
+
+def csv_chunks(path: Path) -> Iterator[bytes]:
+    """A stored Parquet table as CSV (text cells made spreadsheet-safe), in chunks of CSV_BATCH_ROWS rows:
+    the header once, then the rows; memory bounded by one batch."""
+    pf = pq.ParquetFile(path)
+    first = True
+    for batch in pf.iter_batches(batch_size=CSV_BATCH_ROWS):
+        buf = io.BytesIO()
+        pacsv.write_csv(csv_safe(pa.Table.from_batches([batch])), buf,
+                        write_options=pacsv.WriteOptions(include_header=first))
+        first = False
+        yield buf.getvalue()
+    if first:  # no rows: the header alone
+        buf = io.BytesIO()
+        pacsv.write_csv(csv_safe(pf.schema_arrow.empty_table()), buf)
+        yield buf.getvalue()
+
+
+def thin_lines(fig: Figure, max_points: int = FIGURE_LINE_MAX_POINTS,
+               max_markers: int = FIGURE_MARKERS_MAX_POINTS) -> None:
+    """Thin, in place, the long lines of a figure for display (see :func:`display_indices`); lines whose data
+    are not plain numbers, or connected lines whose x is not sorted, are left as they are."""
+    for ax in fig.axes:
+        log_x = ax.get_xscale() == "log"
+        for line in ax.get_lines():
+            x = np.asarray(line.get_xdata(orig=True))
+            y = np.asarray(line.get_ydata(orig=True))
+            connected = line.get_linestyle() not in ("None", "none", "", " ")
+            bound = max_points if connected else max_markers
+            if x.ndim != 1 or x.shape != y.shape or x.size <= bound:
+                continue
+            if not (np.issubdtype(x.dtype, np.number) and np.issubdtype(y.dtype, np.number)):
+                continue
+            keep = display_indices(x.astype(np.float64), y.astype(np.float64), bound, connected=connected,
+                                   log_x=log_x)
+            if keep is not None:
+                line.set_data(x[keep], y[keep])
+
+
+def display_indices(x: NDArray[np.float64], y: NDArray[np.float64], n_out: int, *, connected: bool,
+                    log_x: bool = False) -> NDArray[np.int64] | None:
+    """Indices (sorted) of the points that draw the same picture, or None to keep them all.
+
+    Connected lines with sorted x: M4 (first, last, min and max of n_out/4 equal-width x columns, on log10 x for a
+    log axis; a NaN in y is kept so that the line still breaks there; tsdownsample). Markers only: every k-th
+    point, about n_out (the density of the cloud), plus the M4 points of n_out/400 sorted-x or index columns (its
+outliers, few enough not to change the cloud)."""
+    from tsdownsample import M4Downsampler, NaNM4Downsampler
+
+    if not np.all(np.isfinite(x)):
+        return None
+    xs = x
+    if log_x:
+        if np.any(x <= 0):
+            return None
+        xs = np.log10(x)
+    ordered = bool(np.all(np.diff(xs) >= 0))
+    if connected and not ordered:
+        return None
+    columns = max(4, (n_out if connected else n_out // 100) // 4 * 4)
+    sampler = NaNM4Downsampler() if np.any(np.isnan(y)) else M4Downsampler()
+    base = xs if ordered else np.arange(x.size, dtype=np.float64)
+    keep = np.asarray(sampler.downsample(base, y, n_out=columns), dtype=np.int64)
+    if not connected:
+        keep = np.union1d(keep, np.arange(0, x.size, max(1, -(-x.size // n_out)), dtype=np.int64))
+    return np.unique(keep)

@@ -37,6 +37,9 @@ class Summary(BaseModel):
 
     model_config = ConfigDict(extra="allow")
     warnings: list[WarningOut] = Field(default_factory=list)
+    outputs: dict[str, Any] | None = Field(None, description=(
+        "present when the job's artifacts were bounded (app.jobs.outputs): parquet_only (tables whose CSV is made "
+        "on request), truncated ({table: {rows, stored_rows}}), omitted (artifact names left out), limits"))
 
 
 NUM = float | None

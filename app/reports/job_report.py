@@ -283,7 +283,6 @@ def _sections(data: dict[str, Any], job: Job, store: ArtifactStore, job_type: Jo
 
 
 def _table_info(job: Job, store: ArtifactStore) -> list[dict[str, Any]]:
-    names = {a.name: a for a in job.artifacts}
     out = []
     for a in job.artifacts:
         if a.kind != "table" or not a.name.endswith(".parquet"):
@@ -296,7 +295,7 @@ def _table_info(job: Job, store: ArtifactStore) -> list[dict[str, Any]]:
             cols = list(meta.names)
             rows = pq.read_metadata(path).num_rows
         out.append({"name": stem, "rows": rows, "columns": cols or [], "parquet": a.name,
-                    "csv": f"{stem}.csv" if f"{stem}.csv" in names else None})
+                    "csv": f"{stem}.csv"})  # stored, or made from the Parquet on request
     return out
 
 

@@ -178,3 +178,4 @@ class StoredFile:
     path: Path
     media_type: str
     filename: str
+    csv_from_parquet: bool = False  # path is a Parquet table to hand out as CSV, converted on the fly

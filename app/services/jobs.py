@@ -286,14 +286,23 @@ def artifacts(session: Session, job_id: str, who: Principal) -> list[Artifact]:
 
 
 def artifact_file(session: Session, settings: Settings, job_id: str, name: str, who: Principal) -> StoredFile:
-    """The stored file of artifact ``name`` of the job; NotFound, or Gone when it is missing from the store."""
+    """The stored file of artifact ``name`` of the job; NotFound, or Gone when it is missing from the store.
+    ``<table>.csv`` of a table stored as Parquet only (app.jobs.outputs) gives that Parquet file with
+    ``csv_from_parquet`` set: the caller converts it (app.jobs.outputs.csv_chunks)."""
     get_job(session, job_id, who)
     art = session.scalar(select(Artifact).where(Artifact.job_id == job_id, Artifact.name == name))
+    on_request = False
+    if art is None and name.endswith(".csv"):  # a long table is stored as Parquet only: its CSV on request
+        art = session.scalar(select(Artifact).where(Artifact.job_id == job_id, Artifact.kind == "table",
+                                                    Artifact.name == name[: -len(".csv")] + ".parquet"))
+        on_request = art is not None
     if art is None:
         raise NotFound(f"job {job_id} has no artifact {name!r}")
     path = artifact_store(settings).path(art)
     if not path.is_file():
-        raise Gone(f"artifact {name!r} of job {job_id} is missing on disk")
+        raise Gone(f"artifact {art.name!r} of job {job_id} is missing on disk")
+    if on_request:
+        return StoredFile(path, "text/csv", name, csv_from_parquet=True)
     return StoredFile(path, art.media_type, art.name)
 
 

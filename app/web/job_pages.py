@@ -13,11 +13,12 @@ from collections.abc import Mapping
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Depends, Form, HTTPException, Query, Request
-from fastapi.responses import FileResponse, HTMLResponse, JSONResponse, RedirectResponse, Response
+from fastapi.responses import HTMLResponse, JSONResponse, RedirectResponse, Response
 from pydantic import ValidationError
 
 from app.api.deps import SessionDep, SettingsDep, StoreDep
 from app.api.errors import http_status
+from app.api.routes.jobs import artifact_response
 from app.reports.job_report import render_html, render_pdf
 from app.reports.summary import layout
 from app.services import jobs
@@ -175,8 +176,5 @@ def report_json_download(job_id: str, session: SessionDep, store: StoreDep, who:
 
 
 @router.get("/{job_id}/artifacts/{name}")
-def artifact(job_id: str, name: str, session: SessionDep, settings: SettingsDep, who: WebViewer) -> FileResponse:
-    f = jobs.artifact_file(session, settings, job_id, name, who)
-    inline = f.media_type.startswith("image/")
-    return FileResponse(f.path, media_type=f.media_type, filename=f.filename, headers=NO_STORE,
-                        content_disposition_type="inline" if inline else "attachment")
+def artifact(job_id: str, name: str, session: SessionDep, settings: SettingsDep, who: WebViewer) -> Response:
+    return artifact_response(jobs.artifact_file(session, settings, job_id, name, who), dict(NO_STORE))

@@ -270,9 +270,16 @@ def tai_ns_to_iso(tai_ns: ArrayLike, scale: str = "utc") -> NDArray[np.object_]:
     TimeValueError. TAI/GPS/TT strings carry no zone letter: the caller states the scale (e.g. in
     the column name or a 'time_scale' field), since ISO 8601 has no designator for them.
     """
+    t = as_int_ns(tai_ns, "tai_ns")
+    codes = tai_ns_to_iso_codes(t, scale)
+    return codes.view(f"U{codes.shape[1]}").reshape(t.shape).astype(object)
+
+
+def tai_ns_to_iso_codes(tai_ns: ArrayLike, scale: str = "utc") -> NDArray[np.uint32]:
+    """The text of :func:`tai_ns_to_iso` as character codes, (N, width) uint32 (ASCII) for the N values of
+    tai_ns flattened: for writers that build string columns without a Python object per value."""
     scale = check_scale(scale)
     t = as_int_ns(tai_ns, "tai_ns")
-    shape = t.shape
     t = t.reshape(-1)
     if scale == "utc":
         day, ns_of_day, _ = tai_to_utc_parts(t, LeapTable())
@@ -299,7 +306,7 @@ def tai_ns_to_iso(tai_ns: ArrayLike, scale: str = "utc") -> NDArray[np.object_]:
         put_digits(out, 20, sub_ns // 10 ** (9 - n_frac), n_frac)
     if scale == "utc":
         out[:, -1] = ord("Z")
-    return out.view(f"U{width}").reshape(shape).astype(object)
+    return out
 
 
 # --------------------------------------------------------------------------------------------

@@ -12,12 +12,13 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 from fastapi.testclient import TestClient
+from sqlalchemy import delete
 
 from app.main import create_app
 from processing.simulate.seed003 import simulate_seed003
 from processing.time import timescales
 from storage.db import make_engine, session_factory, upgrade
-from storage.models import Job, Spacecraft, utcnow
+from storage.models import Artifact, Job, Spacecraft, utcnow
 from tests.app.helpers import PARQUET, make_spacecraft, upload
 
 FINAL = ("succeeded", "failed", "cancelled")
@@ -80,6 +81,15 @@ def test_coverage_job_finds_the_simulated_gaps_exactly(client, scenario):
     pq_table = pq.read_table(io.BytesIO(client.get(arts["gaps.parquet"]["url"]).content))
     assert pq_table.column("time_tai_ns").to_pylist() == truth[:, 0].tolist()
     assert client.get(f"/api/v1/jobs/{job['id']}/artifacts/nope.csv").status_code == 404
+    # a long table is stored as Parquet only (app.jobs.outputs): its CSV is made from the Parquet on request,
+    # streamed, with the same bytes as the stored CSV; a name with neither file stays 404
+    with client.app.state.sessions.begin() as session:
+        session.execute(delete(Artifact).where(Artifact.job_id == job["id"], Artifact.name == "gaps.csv"))
+    again = client.get(arts["gaps.csv"]["url"])
+    assert again.status_code == 200 and again.content == csv.content
+    assert again.headers["content-type"].startswith("text/csv")
+    assert 'attachment; filename="gaps.csv"' in again.headers["content-disposition"]
+    assert client.get(f"/api/v1/jobs/{job['id']}/artifacts/summary.csv").status_code == 404
 
     html = client.get(f"/api/v1/jobs/{job['id']}/report")
     assert html.headers["content-type"].startswith("text/html")

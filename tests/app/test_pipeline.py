@@ -229,3 +229,12 @@ def test_alignment_stage_is_skipped_on_an_arc_without_rate_variation(inputs):
     moved = TaskInputs(streams={**inputs.streams, "gyro": slews}, spacecraft=inputs.spacecraft,
                        start_tai_ns=inputs.start_tai_ns, end_tai_ns=inputs.end_tai_ns)
     assert reconstruction._alignment_excited(moved, 0.01) is moved
+
+
+def test_in_sorted_is_isin():
+    """The gyro bridging's membership test by binary search is np.isin (duplicates, misses, empty sides)."""
+    rng = np.random.default_rng(1)
+    for _ in range(30):
+        x = rng.integers(0, 500, size=rng.integers(0, 200))
+        values = np.sort(rng.integers(0, 500, size=rng.integers(0, 200)))
+        np.testing.assert_array_equal(reconstruction._in_sorted(x, values), np.isin(x, values))

@@ -106,6 +106,9 @@ def test_typed_views_one_sensor_in_time_order() -> None:
             "wx": np.array([0.3, 0.1, 0.2]), "wy": np.zeros(3), "wz": np.ones(3)}
     inputs = _inputs({"star_tracker": st, "gyro": gyro})
     assert inputs.sensors("star_tracker") == ("a", "b") and inputs.sensors("magnetometer") == ()
+    odd = _inputs({"gyro": {**gyro, "sensor": np.array([b"g2", 7, "g1"], dtype=object)}})
+    assert odd.sensors("gyro") == ("7", "g1", "g2")  # names that are not str: as numpy's text of them, as before
+    assert all(type(s) is str for s in odd.sensors("gyro") + inputs.sensors("star_tracker"))
     a = inputs.star_tracker("a")
     assert isinstance(a, StarTrackerSamples) and a.sensor == "a" and len(a) == 3
     np.testing.assert_array_equal(a.time_tai_ns, [1, 2, 3])

@@ -6,13 +6,15 @@ import datetime as dt
 from typing import Annotated, Any, Literal, cast
 
 from fastapi import APIRouter, Query, Request, Response, status
-from fastapi.responses import FileResponse, HTMLResponse, JSONResponse
+from fastapi.responses import FileResponse, HTMLResponse, JSONResponse, StreamingResponse
 from pydantic import BaseModel
 
 from app.api.deps import Operator, SessionDep, SettingsDep, StoreDep, Viewer
 from app.api.pagination import MAX_LIMIT, announce_next
+from app.jobs.outputs import csv_chunks
 from app.reports.job_report import render_html, render_pdf
 from app.services import jobs as service
+from app.services.downloads import StoredFile
 from app.services.jobs import JobCreate
 from app.services.times import iso
 from storage.models import Job
@@ -126,12 +128,21 @@ def list_artifacts(job_id: str, session: SessionDep, who: Viewer) -> list[Artifa
             for a in service.artifacts(session, job_id, who)]
 
 
-@router.get("/{job_id}/artifacts/{name}")
-def download_artifact(job_id: str, name: str, session: SessionDep, settings: SettingsDep, who: Viewer) -> FileResponse:
-    f = service.artifact_file(session, settings, job_id, name, who)
+def artifact_response(f: StoredFile, headers: dict[str, str] | None = None) -> Response:
+    """A stored artifact as a download: the file as it is (images inline), or the CSV of a table stored as
+    Parquet only, converted and streamed in row batches (app.jobs.outputs.csv_chunks)."""
+    if f.csv_from_parquet:
+        disposition = {"Content-Disposition": f'attachment; filename="{f.filename}"'}
+        return StreamingResponse(csv_chunks(f.path), media_type="text/csv; charset=utf-8",
+                                 headers={**(headers or {}), **disposition})
     inline = f.media_type.startswith("image/")
-    return FileResponse(f.path, media_type=f.media_type, filename=f.filename,
+    return FileResponse(f.path, media_type=f.media_type, filename=f.filename, headers=headers,
                         content_disposition_type="inline" if inline else "attachment")
+
+
+@router.get("/{job_id}/artifacts/{name}", response_class=Response)
+def download_artifact(job_id: str, name: str, session: SessionDep, settings: SettingsDep, who: Viewer) -> Response:
+    return artifact_response(service.artifact_file(session, settings, job_id, name, who))
 
 
 @router.get("/{job_id}/report", responses={200: {"content": {"text/html": {}, "application/json": {},

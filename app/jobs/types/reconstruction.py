@@ -3,7 +3,8 @@
 Stages, in order, each the ``run`` of its registered job type (those not registered are left out and
 named in the notes): data_screening -> star_tracker_accuracy -> gyro_bias_fit -> orbital_attitude ->
 alignment_calibration (the last only "where configured": the configuration has a gyro and a star
-tracker, or ``calibrate_alignment`` is true).
+tracker, or ``calibrate_alignment`` is true). A stage whose streams are missing from the window, or whose arc
+lacks what :data:`ARC_REQUIREMENTS` asks (alignment_calibration: rate excitation), is skipped with the reason.
 
 What flows between stages:
 
@@ -27,7 +28,7 @@ the stage (``gyro_bias_fit__residuals.csv``), so the standard job report is the 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any, Literal
 
 import numpy as np
@@ -188,6 +189,16 @@ def _alignment_excited(inputs: TaskInputs, min_variation_deg_s: float) -> TaskIn
     return inputs
 
 
+ArcCheck = Callable[[TaskInputs, Params], TaskInputs | str]
+ARC_REQUIREMENTS: dict[str, tuple[ArcCheck, ...]] = {
+    "alignment_calibration": (lambda inputs, params: _alignment_excited(inputs,
+                                                                       params.min_alignment_rate_variation_deg_s),),
+}
+"""What each stage needs the arc to offer beyond its streams (those are checked by :func:`_stage_inputs`):
+checks run in order on the stage's inputs, each giving them back or the reason the stage is skipped (recorded
+as ``stages.<name>.status = "skipped"`` with that reason, and a note)."""
+
+
 def apply_screening(streams: Mapping[str, Mapping[str, NDArray[Any]]],
                     result: TaskResult, *, bridge_gyro_s: float | None = None
                     ) -> tuple[dict[str, dict[str, NDArray[Any]]], dict[str, int]]:
@@ -229,7 +240,7 @@ def _bridge_gyro(raw: Mapping[str, NDArray[Any]], kept: Mapping[str, NDArray[Any
         rows = np.flatnonzero(sensor == name)
         rows = rows[np.argsort(t[rows], kind="stable")]
         acc_t = np.sort(kt[ks == name])
-        accepted = np.isin(t[rows], acc_t)
+        accepted = _in_sorted(t[rows], acc_t)
         keep[rows[accepted]] = True
         rej = rows[~accepted]
         if rej.size == 0 or acc_t.size < 2:
@@ -247,6 +258,14 @@ def _bridge_gyro(raw: Mapping[str, NDArray[Any]], kept: Mapping[str, NDArray[Any
     for c in values:
         out[c] = values[c][keep]
     return out, n_bridged
+
+
+def _in_sorted(x: NDArray[np.int64], sorted_values: NDArray[np.int64]) -> NDArray[np.bool_]:
+    """``np.isin(x, sorted_values)`` for a sorted right-hand side, by binary search (no sort of both)."""
+    if sorted_values.size == 0:
+        return np.zeros(x.shape, dtype=bool)
+    i = np.minimum(np.searchsorted(sorted_values, x), sorted_values.size - 1)
+    return np.asarray(sorted_values[i] == x)
 
 
 def correct_gyro_bias(gyro: Mapping[str, NDArray[Any]], bias_B: NDArray[np.float64],
@@ -298,8 +317,9 @@ def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
         if name in BIAS_CORRECTED_STAGES and raw_gyro_bias_free is not None:
             view = {**streams, "gyro": raw_gyro_bias_free}
         stage_inputs = _stage_inputs(inputs, view, jt)
-        if name == "alignment_calibration" and not isinstance(stage_inputs, str):
-            stage_inputs = _alignment_excited(stage_inputs, params.min_alignment_rate_variation_deg_s)
+        for arc_check in ARC_REQUIREMENTS.get(name, ()):
+            if not isinstance(stage_inputs, str):
+                stage_inputs = arc_check(stage_inputs, params)
         if isinstance(stage_inputs, str):
             stages[name] = {"status": "skipped", "reason": stage_inputs}
             notes.append(f"{name} skipped: {stage_inputs}")

@@ -213,3 +213,29 @@ def test_star_tracker_against_gyro_needs_its_mounting() -> None:
         scr.screen({"star_tracker": st, "gyro": gyro}, config)
     without_gyro = scr.screen({"star_tracker": st}, config)  # against max_rate_rad_s: no mounting needed
     assert without_gyro.n_rows == {"star_tracker": t.size}
+
+
+def test_rolling_median_is_numpys_nanmedian_of_the_windows():
+    """rolling_median sorts the short windows itself (numpy's nanmedian takes a slow masked route there): the
+    same values, NaN for windows without a sample, even and odd counts, excluded rows and a left-out centre."""
+    from numpy.lib.stride_tricks import sliding_window_view
+
+    from processing.screening.tools import nanmedian_last_axis, rolling_median
+
+    rng = np.random.default_rng(4)
+    a = rng.normal(size=(3000, 3))
+    a[rng.random(3000) < 0.2] = np.nan
+    a[100:140] = np.nan  # windows with no sample at all
+    for hw in (1, 4, 7):
+        win = sliding_window_view(np.concatenate([np.full((hw, 3), np.nan), a, np.full((hw, 3), np.nan)]),
+                                  2 * hw + 1, axis=0)
+        with np.errstate(all="ignore"), pytest.warns(RuntimeWarning):
+            expected = np.nanmedian(win, axis=-1)
+        np.testing.assert_array_equal(nanmedian_last_axis(win), expected)
+    exclude = rng.random(3000) < 0.1
+    med = rolling_median(a, 3, exclude, leave_out_centre=True)
+    b = np.where(exclude[:, None], np.nan, a)
+    win = sliding_window_view(np.concatenate([np.full((3, 3), np.nan), b, np.full((3, 3), np.nan)]), 7, axis=0).copy()
+    win[:, :, 3] = np.nan
+    with pytest.warns(RuntimeWarning):
+        np.testing.assert_array_equal(med, np.nanmedian(win, axis=-1))
