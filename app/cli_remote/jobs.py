@@ -99,7 +99,13 @@ def _jobs_artifacts(args: argparse.Namespace) -> int:
     full = client.resolve_job(args.id)
     items = [a for a in client.artifacts(full) if args.kind is None or a["kind"] == args.kind]
     if args.name:
-        items = [a for a in items if a["name"] in args.name]
+        listed = {a["name"]: a for a in items}
+        for name in args.name:  # a long table is stored as Parquet only; the service makes its CSV on request
+            stem = name[:-4] if name.endswith(".csv") else None
+            if name not in listed and stem is not None and f"{stem}.parquet" in listed:
+                listed[name] = {**listed[f"{stem}.parquet"], "name": name, "media_type": "text/csv",
+                                "description": f"{listed[f'{stem}.parquet']['description']} (CSV made on request)"}
+        items = [listed[n] for n in dict.fromkeys(args.name) if n in listed]
         missing = sorted(set(args.name) - {a["name"] for a in items})
         if missing:
             raise UsageError(f"job {full[:8]} has no artifact {', '.join(map(repr, missing))}")
@@ -161,6 +167,7 @@ def add_jobs_commands(sub: Any, parent: argparse.ArgumentParser) -> None:
     p = jobs.add_parser("artifacts", parents=[parent], help="list a job's artifacts, or save them with --download")
     p.add_argument("id", help="job id or a unique prefix")
     p.add_argument("--kind", choices=["table", "figure", "file", "summary"])
-    p.add_argument("--name", action="append", help="only this artifact; repeatable")
+    p.add_argument("--name", action="append", help="only this artifact; repeatable (a table stored as Parquet only: "
+                   "<table>.csv is made on request)")
     p.add_argument("--download", metavar="DIR", help="save the (selected) artifacts into DIR")
     p.set_defaults(func=_jobs_artifacts)

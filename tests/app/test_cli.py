@@ -233,6 +233,14 @@ def test_jobs_result_report_artifacts_cancel_with_short_ids(server, capsys, tmp_
         "coverage.csv", "coverage.parquet", "gaps.csv", "gaps.parquet"]
     code, _, err = cli(capsys, server, "jobs", "artifacts", short, "--name", "nope.csv", "--download", str(tmp_path))
     assert code == 2 and "no artifact 'nope.csv'" in err
+    real_artifacts = Client.artifacts  # a long table is listed as Parquet only: its CSV is still asked for by name
+    monkeypatch.setattr(Client, "artifacts", lambda self, job: [a for a in real_artifacts(self, job)
+                                                               if a["name"] != "gaps.csv"])
+    code, out, err = cli(capsys, server, "jobs", "artifacts", short, "--name", "gaps.csv", "--download",
+                         str(tmp_path / "b"))
+    assert code == 0 and [p.name for p in (tmp_path / "b").iterdir()] == ["gaps.csv"], err
+    assert (tmp_path / "b" / "gaps.csv").read_bytes() == (tmp_path / "a" / "gaps.csv").read_bytes()
+    monkeypatch.setattr(Client, "artifacts", real_artifacts)
     code, out, _ = cli(capsys, server, "jobs", "submit", "executor_check", "--spacecraft", "jobs1", "--params-json",
                        '{"duration_s": 60}')
     long_id = out.strip()
