@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 import pyarrow.parquet as pq
-from pydantic import ValidationError
+from pydantic import BaseModel, ValidationError
 from sqlalchemy import select
 from sqlalchemy.orm import Session, sessionmaker
 
@@ -65,21 +65,27 @@ class ProgressReporter:
             raise JobCancelled()
 
 
-def stream_names(job_type: JobType) -> tuple[str, ...]:
-    if job_type.any_stream:
-        return tuple(STREAMS)
-    return job_type.streams + job_type.optional_streams
+def stream_names(job_type: JobType, params: BaseModel | None = None) -> tuple[str, ...]:
+    """The streams a job of this type reads: every one it declares (``params`` None: what a job of the type
+    may read, for submission checks and retractions), or, given its validated params, those its
+    ``input_streams`` says this run uses (the required ones always)."""
+    names = tuple(STREAMS) if job_type.any_stream else job_type.streams + job_type.optional_streams
+    if params is None or job_type.input_streams is None:
+        return names
+    used = set(job_type.input_streams(params)) | set(job_type.streams)
+    return tuple(n for n in names if n in used)
 
 
-def load_inputs(session: Session, settings: Settings, job: Job,
-                job_type: JobType) -> tuple[TaskInputs, list[str]]:
-    """The task's inputs and notes on what was done to them (calibration applied)."""
+def load_inputs(session: Session, settings: Settings, job: Job, job_type: JobType,
+                params: BaseModel | None = None) -> tuple[TaskInputs, list[str]]:
+    """The task's inputs and notes on what was done to them (calibration applied); with ``params``, only the
+    streams the run uses (:func:`stream_names`) are read from the store."""
     store = ParquetStore(settings.telemetry_url)
     spacecraft = spacecraft_from_stored(session.scalar(select(SpacecraftConfig.config).where(
         SpacecraftConfig.spacecraft_id == job.spacecraft_id, SpacecraftConfig.version == job.config_version)),
         job.config_version)
     streams: dict[str, dict[str, np.ndarray]] = {}
-    for name in stream_names(job_type):
+    for name in stream_names(job_type, params):
         table = read_window(session, store, job.spacecraft_id, STREAMS[name], job.start_tai_ns, job.end_tai_ns)
         if table.num_rows:
             streams[name] = {c: table.column(c).to_numpy(zero_copy_only=False) for c in table.column_names}
@@ -273,7 +279,7 @@ def _execute(job_id: str, settings: Settings, sessions: sessionmaker[Session], a
             except ValidationError as exc:  # valid at submission; a software update may have changed the model
                 raise TaskError(str(exc)) from exc
             progress(0.01, "loading telemetry")
-            inputs, input_notes = load_inputs(session, settings, job, job_type)
+            inputs, input_notes = load_inputs(session, settings, job, job_type, params)
             spacecraft_id = job.spacecraft_id
         progress(0.05, "computing")
         result = job_type.run(inputs, params, progress)

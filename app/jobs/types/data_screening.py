@@ -18,6 +18,7 @@ from app.jobs.registry import JobType
 from app.reports.headline import Answer
 from processing.screening.criteria import ScreeningParams, screen
 from processing.screening.flags import flags_table
+from processing.streams import STREAMS
 from processing.tasks import Progress, ResultWarning, TaskError, TaskInputs, TaskResult
 from processing.units import NS_PER_S
 
@@ -74,6 +75,16 @@ def _screening_params(p: Params) -> ScreeningParams:
         star_tracker_error_rad=float(np.deg2rad(p.star_tracker_error_arcsec / 3600.0)),
         k_time_tag=p.k_time_tag, transient_consistency=p.transient_consistency,
     )
+
+
+def input_streams(params: Params) -> tuple[str, ...]:
+    """The streams a run reads: every one by default; with ``streams``, those, GNSS (its accepted states give
+    the position the other criteria need) and, for the star tracker, the gyro (the rate its jumps are judged
+    with)."""
+    if params.streams is None:
+        return tuple(STREAMS)
+    extra = ("gnss",) + (("gyro",) if "star_tracker" in params.streams else ())
+    return tuple(dict.fromkeys([*params.streams, *extra]))
 
 
 def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
@@ -249,7 +260,7 @@ def figures(result: TaskResult, params: Params) -> dict[str, Figure]:
 
 JOB = JobType(
     name="data_screening", title="Telemetry screening (002 eqs. 15-17)", paper="002 eqs. 15-17", params=Params,
-    run=run, any_stream=True, figures=figures, reference=("rinex_nav", "reference_orbit"),
+    run=run, any_stream=True, input_streams=input_streams, figures=figures, reference=("rinex_nav", "reference_orbit"),
     description="Flags every sample of GNSS, magnetometer, panel-current, visibility and other streams with the "
                 "criteria it fails: energy integral (eq. 15, J2-aware), field magnitude against IGRF-14 (eq. 16), "
                 "panel currents against the shadow/unit-sun models (eq. 17), orbit plane, kinematic and velocity "

@@ -278,6 +278,11 @@ def _tables(r: StarTrackerAccuracy) -> dict[str, dict[str, np.ndarray]]:
     return tables
 
 
+def input_streams(params: Params) -> tuple[str, ...]:
+    """The streams a run reads: the gyro only with use_gyro (the runner does not load it otherwise)."""
+    return ("star_tracker", "gyro") if params.use_gyro else ("star_tracker",)
+
+
 def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
     progress(0.02, "loading")
     heads = multi_head.head_names(inputs, params.heads) if params.heads else []
@@ -341,6 +346,7 @@ JOB = JobType(
     run=run,
     streams=("star_tracker",),
     optional_streams=("gyro",),
+    input_streams=input_streams,
     figures=figures,
     description=(
         "Per-axis accuracy of a star tracker from its quaternions (003 §1.3-1.5): mean quaternion, Rodrigues "
