@@ -39,6 +39,7 @@ from processing.signal.sine_series_fit import SineSeriesFit
 from processing.signal.spectral import alias_frequency
 from processing.signal.spectral_lines import SinusoidFit, find_lines, fit_sinusoids, separable_frequencies
 from processing.star_tracker.smoothing import SegmentSmoothing, rate_from_mrp, seconds_since, sensor_axis_residuals
+from processing.tasks import Mapper, serial_map
 
 __all__ = [
     "GyroAnalysis",
@@ -142,6 +143,35 @@ def fit_gyro_segment(
     m_g = gyro_harmonics(star_tracker_fit.harmonics, star_tracker_fit.span_s, tg)
     gfit = fit_sine_series(tg, w_B[idx], m_g)
     return GyroSegmentFit(idx, tg, m_g, gfit, gfit.residuals(w_B[idx]))
+
+
+def _gyro_part(part: tuple[NDArray, NDArray, int]) -> tuple[SineSeriesFit, NDArray]:
+    """One segment's gyro smoothing (a part for the mapper): times [s], rates (K, 3), harmonics."""
+    tg, w, m_g = part
+    gfit = fit_sine_series(tg, w, m_g)
+    return gfit, gfit.residuals(w)
+
+
+def _fit_gyro_segments(segments: Sequence[SegmentSmoothing], index: Sequence[NDArray | None], g_ns: NDArray,
+                       w_B: NDArray, mapper: Mapper) -> tuple[GyroSegmentFit | None, ...]:
+    """:func:`fit_gyro_segment` of every covered segment, the smoothings through ``mapper`` (same results)."""
+    parts, meta = [], []
+    for seg, idx in zip(segments, index, strict=True):
+        if idx is None:
+            continue
+        tg = seconds_since(g_ns[idx], seg.t0_ns)
+        m_g = gyro_harmonics(seg.fit_raw.harmonics, seg.fit_raw.span_s, tg)
+        parts.append((tg, w_B[idx], m_g))
+        meta.append((idx, tg, m_g))
+    done = iter(zip(meta, mapper(_gyro_part, parts), strict=True))
+    out: list[GyroSegmentFit | None] = []
+    for idx in index:
+        if idx is None:
+            out.append(None)
+            continue
+        (i, tg, m_g), (gfit, resid) = next(done)
+        out.append(GyroSegmentFit(i, tg, m_g, gfit, resid))
+    return tuple(out)
 
 
 def find_gyro_lines(
@@ -316,17 +346,17 @@ def _gyro_index(seg: SegmentSmoothing, t_ns: NDArray, g_ns: NDArray) -> NDArray 
 def analyze_gyro(
     segments: Sequence[SegmentSmoothing], t_ns: NDArray, g_ns: NDArray, w_B: NDArray, dcm_BS: NDArray,
     cutoff_hz: float, sample_period_s: float, false_alarm: float, scale_S: NDArray | None = None,
+    mapper: Mapper = serial_map,
 ) -> GyroAnalysis | None:
     """Steps 5 and 7 for the star-tracker segments (times t_ns (N,)) and gyro rates w_B (K, 3) at g_ns (K,):
     smoothing per segment, lines above cutoff_hz, the attitude oscillation per segment of the lines
     coherent with the star tracker (scale_S (3,) rad: its noise scale per sensor axis for the coherence
     regression; None: every line removed, no test). None when the gyro samples cover no segment densely
-    enough."""
+    enough. ``mapper``: how the per-segment gyro smoothings are run (processing.tasks.Mapper)."""
     index = [_gyro_index(seg, t_ns, g_ns) for seg in segments]
     if all(idx is None for idx in index):
         return None
-    fits = tuple(None if idx is None else fit_gyro_segment(seg, idx, g_ns, w_B, seg.fit_raw)
-                 for seg, idx in zip(segments, index, strict=True))
+    fits = _fit_gyro_segments(segments, index, g_ns, w_B, mapper)
     lines = find_gyro_lines([f for f in fits if f is not None], g_ns, cutoff_hz, sample_period_s, false_alarm)
     per_line = [segment_line_motions(seg, f, lines.fits, dcm_BS) for seg, f in zip(segments, fits, strict=True)]
     if scale_S is None:

@@ -10,12 +10,14 @@ check (app.jobs.plausibility.check_heads) when gyro data are used.
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from typing import Annotated, Any, Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
 from app.jobs import multi_head
+from app.jobs.partitions import map_partitions
 from app.jobs.plausibility import HeadSamples, check_heads
 from app.jobs.registry import JobType
 from app.jobs.types.star_tracker_accuracy_figures import figures
@@ -278,6 +280,11 @@ def _tables(r: StarTrackerAccuracy) -> dict[str, dict[str, np.ndarray]]:
     return tables
 
 
+def segment_map(func: Callable[[Any], Any], parts: Sequence[Any]) -> list[Any]:
+    """The per-segment smoothings split across the executor's workers (app.jobs.partitions)."""
+    return map_partitions(func, parts, stage="segments")
+
+
 def input_streams(params: Params) -> tuple[str, ...]:
     """The streams a run reads: the gyro only with use_gyro (the runner does not load it otherwise)."""
     return ("star_tracker", "gyro") if params.use_gyro else ("star_tracker",)
@@ -304,6 +311,7 @@ def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
             q_BG=(1.0, 0.0, 0.0, 0.0) if gyro is None else gyro[2],
             harmonics=None if params.harmonics == "auto" else int(params.harmonics),
             progress=lambda f, stage: progress(0.05 + 0.85 * f, stage),
+            mapper=segment_map,
         )
     except StarTrackerAccuracyError as exc:
         raise TaskError(str(exc)) from exc
