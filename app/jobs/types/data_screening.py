@@ -8,12 +8,14 @@ inputs with :func:`processing.screening.flags.filter_streams` and the stored ``f
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from typing import Any, Literal
 
 import numpy as np
 from matplotlib.figure import Figure
 from pydantic import BaseModel, ConfigDict, Field
 
+from app.jobs.partitions import map_partitions
 from app.jobs.registry import JobType
 from app.reports.headline import Answer
 from processing.screening.criteria import ScreeningParams, screen
@@ -77,6 +79,11 @@ def _screening_params(p: Params) -> ScreeningParams:
     )
 
 
+def stream_map(func: Callable[[Any], Any], parts: Sequence[Any]) -> list[Any]:
+    """The streams (after GNSS) screened across the executor's workers (app.jobs.partitions)."""
+    return map_partitions(func, parts, stage="streams")
+
+
 def input_streams(params: Params) -> tuple[str, ...]:
     """The streams a run reads: every one by default; with ``streams``, those, GNSS (its accepted states give
     the position the other criteria need) and, for the star tracker, the gyro (the rate its jumps are judged
@@ -109,7 +116,8 @@ def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
     nav_ref = inputs.reference.get("rinex_nav")
     progress(0.1, "screening")
     result = screen(inputs.streams, inputs.spacecraft, _screening_params(params), reference_orbit=reference,
-                    reference_frame=frame, nav=None if nav_ref is None else nav_ref.columns, selected=selected)
+                    reference_frame=frame, nav=None if nav_ref is None else nav_ref.columns, selected=selected,
+                    mapper=stream_map)
     notes += result.notes
     progress(0.7, "flags table")
     crit = result.summary()

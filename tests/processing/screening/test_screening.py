@@ -213,3 +213,25 @@ def test_star_tracker_against_gyro_needs_its_mounting() -> None:
         scr.screen({"star_tracker": st, "gyro": gyro}, config)
     without_gyro = scr.screen({"star_tracker": st}, config)  # against max_rate_rad_s: no mounting needed
     assert without_gyro.n_rows == {"star_tracker": t.size}
+
+
+def test_the_streams_after_gnss_give_the_same_result_on_any_mapper() -> None:
+    """The non-GNSS streams are screened through the mapper (a cluster's workers in a job): run in reverse
+    order on other threads, the criteria, notes and findings are those of the serial run, in its order."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    sc, serial = screened(0)
+    names: list[list[str]] = []
+
+    def reversed_threads(func, parts):  # noqa: ANN001, ANN202
+        names.append([p.name for p in parts])
+        with ThreadPoolExecutor(2) as pool:
+            return list(reversed(list(pool.map(func, list(reversed(parts))))))
+
+    mapped = scr.screen(sc.streams, Spacecraft.from_json(sc.config), nav=nav(), mapper=reversed_threads)
+    assert len(names) == 1 and len(names[0]) >= 3 and "gnss" not in names[0]
+    assert [(c.stream, c.name) for c in mapped.criteria] == [(c.stream, c.name) for c in serial.criteria]
+    for a, b in zip(mapped.criteria, serial.criteria, strict=True):
+        for field in ("flagged", "applied", "statistic"):
+            np.testing.assert_array_equal(getattr(a, field), getattr(b, field))
+    assert (mapped.n_rows, mapped.notes, mapped.findings) == (serial.n_rows, serial.notes, serial.findings)
