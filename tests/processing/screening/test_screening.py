@@ -235,3 +235,20 @@ def test_the_streams_after_gnss_give_the_same_result_on_any_mapper() -> None:
         for field in ("flagged", "applied", "statistic"):
             np.testing.assert_array_equal(getattr(a, field), getattr(b, field))
     assert (mapped.n_rows, mapped.notes, mapped.findings) == (serial.n_rows, serial.notes, serial.findings)
+
+
+def test_the_rolling_median_in_blocks_is_the_whole_one() -> None:
+    """rolling_median works in blocks of rows (bounded memory): any block size gives the same medians."""
+    from processing.screening.tools import rolling_median
+
+    rng = np.random.default_rng(4)
+    x = rng.normal(size=(1000, 3))
+    x[rng.random(1000) < 0.05, 1] = np.nan
+    exclude = rng.random(1000) < 0.1
+    whole = rolling_median(x, 5, exclude, leave_out_centre=True, chunk_rows=10**6)
+    for rows in (1, 7, 64, 999):
+        np.testing.assert_array_equal(rolling_median(x, 5, exclude, leave_out_centre=True, chunk_rows=rows), whole)
+    one_d = rolling_median(x[:, 0], 3, chunk_rows=10**6)
+    np.testing.assert_array_equal(rolling_median(x[:, 0], 3, chunk_rows=13), one_d)
+    neighbours = [*range(495, 500), *range(501, 506)]
+    assert whole[500, 0] == np.median(x[neighbours, 0][~exclude[neighbours]])
