@@ -31,7 +31,7 @@ def sample_keys(stream: str, cols: Columns) -> NDArray[np.object_]:
 def _shared_strings(values: ArrayLike) -> NDArray[np.object_]:
     """``values`` as an object array of str, one str object per distinct value (not one per row)."""
     codes, uniques = pd.factorize(np.asarray(values, dtype=object), use_na_sentinel=False)
-    return np.asarray([str(u) for u in uniques] + [""], dtype=object)[:-1][codes]
+    return np.array([str(u) for u in uniques], dtype=object)[codes]
 
 
 def flags_table(result: ScreeningResult, streams: Mapping[str, Columns]) -> dict[str, NDArray[Any]]:
