@@ -298,8 +298,13 @@ def _execute(job_id: str, settings: Settings, sessions: sessionmaker[Session], a
             progress(0.01, "loading telemetry")
             inputs, input_notes = load_inputs(session, settings, job, job_type, params)
             spacecraft_id = job.spacecraft_id
+        # what the record says of the inputs, taken now: the telemetry is let go once the task has run, before
+        # the figures and artifacts (the largest arrays of a long window need not be held twice)
+        counts = input_counts(inputs)
+        coverage = jsonable(describe_inputs(inputs.streams, inputs.start_tai_ns, inputs.end_tai_ns))
         progress(0.05, "computing")
         result = job_type.run(inputs, params, progress)
+        del inputs
         progress(0.9, "drawing figures")
         figures = job_type.figures(result, params)
         summary = jsonable({"warnings": [w.as_dict() for w in result.warnings], **result.summary})
@@ -308,9 +313,7 @@ def _execute(job_id: str, settings: Settings, sessions: sessionmaker[Session], a
             jobstore.add_artifacts(session, job_id, stored)
             done = jobstore.set_status(
                 session, job_id, "succeeded", allowed_from=("running",), progress=1.0, stage="done",
-                result={"summary": summary, "inputs": input_counts(inputs),
-                        "input_coverage": jsonable(describe_inputs(inputs.streams, inputs.start_tai_ns,
-                                                                   inputs.end_tai_ns)),
+                result={"summary": summary, "inputs": counts, "input_coverage": coverage,
                         "notes": input_notes + list(result.notes)})
             if done and job_type.produces_calibration and summary.get("calibration_complete"):
                 add_version(session, spacecraft_id, job_type.produces_calibration, summary["calibration"], job_id)
