@@ -86,7 +86,8 @@ def map_partitions(func: Callable[[T], R], parts: Sequence[T], *, progress: Prog
         from distributed import as_completed, worker_client
 
         with worker_client(separate_thread=True) as client:
-            futures = client.map(func, list(parts), pure=False)
+            # the parts go to the workers directly (not inside the task graph, through the scheduler)
+            futures = client.map(func, client.scatter(list(parts), hash=False), pure=False)
             for done, _ in enumerate(as_completed(futures), start=1):
                 progress(done / n, f"{stage} {done}/{n}")
             results: list[R] = client.gather(futures)

@@ -430,7 +430,7 @@ def analyze_star_tracker_accuracy(
     report(0.7, "residuals")
     cmp = None if gyro is None else gyro_comparison(  # 5
         segments, [c.fit for c in corrected], gyro.fits, gyro.time_tai_ns, gyro.w_B_rad_s, inp.dcm_BS, sig.sigma,
-        gyro.lines.fits,
+        gyro.lines.fits, mapper,
     )
     spec = _spectra(inp, res, w_B, gyro, cmp, cutoff_hz, line_false_alarm)  # 6
     quality = _quality(inp, res, sig.sigma, spec.lines)  # 3b

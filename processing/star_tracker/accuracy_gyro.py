@@ -389,10 +389,17 @@ class _SegmentComparison:
     n_gyro: int
 
 
-def _compare_segment(
-    seg: SegmentSmoothing, fit: SineSeriesFit, gf: GyroSegmentFit, g_ns: NDArray, dcm_BS: NDArray,
-    sigma_S: NDArray, line_fits: Sequence[SinusoidFit],
-) -> _SegmentComparison:
+_ComparePart = tuple[SegmentSmoothing, SineSeriesFit, GyroSegmentFit, NDArray, "NDArray | None", NDArray, NDArray,
+                     Sequence[SinusoidFit]]
+
+
+def _compare_segment(part: _ComparePart) -> _SegmentComparison:
+    """One segment of the comparison (a part for the mapper): the segment, its final star-tracker fit, its gyro
+    fit, the gyro times of that fit (K,), the gyro rates (K, 3) when the fit must be redone with the final
+    fit's cutoff (else None), dcm_BS, the sensor sigma and the gyro lines."""
+    seg, fit, gf, g_seg, w_seg, dcm_BS, sigma_S, line_fits = part
+    if w_seg is not None:
+        gf = fit_gyro_segment(seg, np.arange(g_seg.size), g_seg, w_seg, fit)
     tg, gfit, resid = gf.t_s, gf.fit, gf.residuals
     rss_s = np.sum(resid**2, axis=0)
     seg_lines = segment_lines(line_fits, tg)
@@ -404,7 +411,7 @@ def _compare_segment(
     st = rate_from_mrp(fit.evaluate(tg_in), fit.derivative(tg_in)) @ dcm_BS.T
     off = np.mean(g_sm - st, axis=0)
     return _SegmentComparison(
-        time_tai_ns=g_ns[gf.idx][inside], w_gyro=g_sm - off, w_st=st, offset=off, rss_smoothing=rss_s,
+        time_tai_ns=g_seg[inside], w_gyro=g_sm - off, w_st=st, offset=off, rss_smoothing=rss_s,
         dof_smoothing=gfit.dof, rss_noise=np.sum(resid**2, axis=0), dof_noise=gfit.dof - 2 * seg_lines.size,
         var_st_B=rate_noise_factor(seg.solver, fit) * (dcm_BS**2 @ sigma_S**2), n_inside=tg_in.size,
         n_parameters=gf.harmonics + 2, n_gyro=tg.size,
@@ -420,17 +427,18 @@ def gyro_comparison(
     dcm_BS: NDArray,
     sigma_S: NDArray,
     line_fits: Sequence[SinusoidFit],
+    mapper: Mapper = serial_map,
 ) -> GyroComparison:
     """Step 5 (003 §1.4): smoothed gyro (the cutoff of each segment's final fit ``fits``) against the
     star-tracker rates, offsets matched. The gyro fits of step 7 are reused when the harmonic count is
-    the same; segments without gyro samples (None) are left out."""
-    parts = []
+    the same; segments without gyro samples (None) are left out. The segments go through ``mapper``."""
+    todo: list[_ComparePart] = []
     for seg, fit, gf in zip(segments, fits, gyro_fits, strict=True):
         if gf is None:
             continue
-        if gyro_harmonics(fit.harmonics, fit.span_s, gf.t_s) != gf.harmonics:
-            gf = fit_gyro_segment(seg, gf.idx, g_ns, w_B_gyro, fit)
-        parts.append(_compare_segment(seg, fit, gf, g_ns, dcm_BS, sigma_S, line_fits))
+        refit = gyro_harmonics(fit.harmonics, fit.span_s, gf.t_s) != gf.harmonics
+        todo.append((seg, fit, gf, g_ns[gf.idx], w_B_gyro[gf.idx] if refit else None, dcm_BS, sigma_S, line_fits))
+    parts: list[_SegmentComparison] = mapper(_compare_segment, todo)
     rss_s, rss_n = np.zeros(3), np.zeros(3)
     for p in parts:
         rss_s += p.rss_smoothing

@@ -269,8 +269,8 @@ def test_bad_inputs():
 
 
 def test_the_per_segment_smoothings_give_the_same_result_on_any_mapper():
-    """The segments' smoothings (star tracker and gyro) go through the mapper (a cluster's workers in a job):
-    run in reverse order on another thread, the parts come back in place and every output is bit-identical."""
+    """The per-segment smoothings (star tracker, gyro) and gyro comparisons go through the mapper (a cluster's
+    workers in a job): run in reverse order on other threads, the parts come back in place, outputs bit-identical."""
     from concurrent.futures import ThreadPoolExecutor
 
     sc = simulate(3, duration_s=1800.0)
@@ -285,7 +285,7 @@ def test_the_per_segment_smoothings_give_the_same_result_on_any_mapper():
     kw = {"gyro_time_tai_ns": t_g, "w_G_rad_s": w, "segment_max_s": 400.0}
     serial = analyze_star_tracker_accuracy(t_st, q, sc.truth.q_BS, **kw)
     mapped = analyze_star_tracker_accuracy(t_st, q, sc.truth.q_BS, mapper=reversed_threads, **kw)
-    assert len(calls) == 2 and calls[0] == len(serial.segments) >= 4  # star tracker, then gyro
+    assert len(calls) == 3 and calls[0] == len(serial.segments) >= 4  # star tracker, gyro, comparison
     for name in ("z_fit", "residuals_rad", "residuals_smoothing_rad", "motion_rad", "w_B_rad_s", "sigma_rad",
                  "sigma_smoothing_rad", "sigma_robust_rad", "outlier"):
         np.testing.assert_array_equal(getattr(mapped, name), getattr(serial, name), err_msg=name)
