@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import time
 from functools import partial
 from typing import Any
@@ -118,6 +119,9 @@ def main() -> None:
             same = _close(serial, local) and _close(serial, remote_summary)
             print(f"{name:24} {serial_s:9.2f} {local_s:9.2f} {dask_s:9.2f} {serial_s / dask_s:12.2f} "
                   f"{local_s / dask_s:11.2f}  {same}", flush=True)
+    load = os.getloadavg()[0]
+    print(f"\nload average (1 min) at the end: {load:.1f} on {os.cpu_count()} cores: parallel parts gain only "
+          "on cores that other processes leave free")
 
 
 if __name__ == "__main__":
