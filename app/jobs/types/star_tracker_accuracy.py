@@ -87,6 +87,8 @@ def _gyro(inputs: TaskInputs, notes: list[str]) -> tuple[np.ndarray, np.ndarray,
         notes.append(f"several gyro sensors {list(sensors)}: used {sensors[0]!r}")
     g = inputs.gyro(sensors[0])
     keep = np.concatenate([[True], np.diff(g.time_tai_ns) > 0])
+    if np.all(keep):  # the usual case: no copy of a long window's rates
+        return g.time_tai_ns, g.w_G_rad_s, inputs.spacecraft.gyro_mounting()
     return g.time_tai_ns[keep], g.w_G_rad_s[keep], inputs.spacecraft.gyro_mounting()
 
 
