@@ -190,18 +190,6 @@ def test_a_stream_the_params_leave_unused_is_not_read(client, settings, monkeypa
     assert runner.stream_names(declared) == ("star_tracker", "gyro", "gnss")
 
 
-def test_the_job_types_declare_the_streams_their_params_leave_unused() -> None:
-    from app.jobs.types import data_screening, star_tracker_accuracy
-
-    st = star_tracker_accuracy.JOB
-    assert runner.stream_names(st, st.params(use_gyro=False)) == ("star_tracker",)
-    assert runner.stream_names(st, st.params()) == ("star_tracker", "gyro")
-    ds = data_screening.JOB
-    assert set(runner.stream_names(ds, ds.params())) == set(runner.stream_names(ds))
-    assert set(runner.stream_names(ds, ds.params(streams=["magnetometer"]))) == {"magnetometer", "gnss"}
-    assert set(runner.stream_names(ds, ds.params(streams=["star_tracker"]))) == {"star_tracker", "gyro", "gnss"}
-
-
 def test_stored_columns_become_the_same_arrays_with_one_str_per_sensor() -> None:
     import pyarrow as pa
 
