@@ -12,7 +12,7 @@ is treated by the runner as an internal error (logged with its traceback).
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, TypeVar
 
@@ -38,11 +38,20 @@ if TYPE_CHECKING:
 
 Columns = Mapping[str, NDArray[Any]]
 Progress = Callable[[float, str], None]
+Mapper = Callable[[Callable[[Any], Any], Sequence[Any]], list[Any]]
+"""``mapper(func, parts) == [func(p) for p in parts]``, perhaps in parallel: how a task splits independent work
+(segments, streams) without knowing where it runs; the job layer passes app.jobs.partitions.map_partitions.
+``func`` is a module-level pure function (a cluster pickles it by reference)."""
 V = TypeVar("V", bound=Samples)
 
 
 def no_progress(fraction: float, stage: str) -> None:
     """Default progress callback (does nothing)."""
+
+
+def serial_map(func: Callable[[Any], Any], parts: Sequence[Any]) -> list[Any]:
+    """The default :data:`Mapper`: in order, here."""
+    return [func(p) for p in parts]
 
 
 @dataclass(frozen=True)

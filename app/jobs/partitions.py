@@ -4,7 +4,8 @@ For algorithms whose work splits by time (screening, per-window fits, spectra of
 type's ``run`` cuts its inputs with :func:`time_partitions` / :func:`split_columns` and calls
 :func:`map_partitions`, then merges the results itself. Where the parts run:
 
-- on a Dask worker (``ATTITUDE_EXECUTOR=dask``): as tasks of the same cluster, submitted from the job
+- on a Dask worker (``ATTITUDE_EXECUTOR=dask``): as tasks of the same cluster (BATCHES_PER_THREAD per
+  worker thread, or ``max_workers``, each a run of consecutive parts), submitted from the job
   with ``distributed.worker_client`` (the job's thread secedes while it waits, so a cluster of
   single-threaded workers cannot deadlock);
 - elsewhere (local executor, tests): in a thread pool of the job's worker process (numpy releases
@@ -76,6 +77,21 @@ def _dask_client_available() -> bool:
     return True
 
 
+BATCHES_PER_THREAD = 2
+"""On Dask, the parts go in this many tasks per worker thread (consecutive runs of parts; some slack for
+uneven parts)."""
+
+
+def _batches(parts: list[T], k: int) -> list[list[T]]:
+    """``parts`` cut into ``k`` consecutive runs of nearly equal length (in order)."""
+    edges = np.linspace(0, len(parts), k + 1).round().astype(int)
+    return [parts[a:b] for a, b in zip(edges[:-1], edges[1:], strict=True) if b > a]
+
+
+def _run_batch(func: Callable[[T], R], batch: Sequence[T]) -> list[R]:
+    return [func(p) for p in batch]
+
+
 def map_partitions(func: Callable[[T], R], parts: Sequence[T], *, progress: Progress = no_progress,
                    stage: str = "partitions", max_workers: int | None = None) -> list[R]:
     """``[func(p) for p in parts]``, in parallel where the job runs (see the module docstring)."""
@@ -86,11 +102,14 @@ def map_partitions(func: Callable[[T], R], parts: Sequence[T], *, progress: Prog
         from distributed import as_completed, worker_client
 
         with worker_client(separate_thread=True) as client:
-            futures = client.map(func, list(parts), pure=False)
+            # a few tasks per worker thread, each a run of consecutive parts (small parts cost more to schedule
+            # than to compute), their data sent to the workers directly rather than inside the task graph
+            threads = sum(client.nthreads().values()) or 1
+            batches = _batches(list(parts), min(n, max_workers or BATCHES_PER_THREAD * threads))
+            futures = client.map(_run_batch, [func] * len(batches), client.scatter(batches, hash=False), pure=False)
             for done, _ in enumerate(as_completed(futures), start=1):
-                progress(done / n, f"{stage} {done}/{n}")
-            results: list[R] = client.gather(futures)
-            return results
+                progress(done / len(batches), f"{stage} {done}/{len(batches)}")
+            return [r for batch in client.gather(futures) for r in batch]
     if n == 1 or max_workers == 1:
         results = []
         for i, p in enumerate(parts):

@@ -7,7 +7,7 @@ wraps is a pure function in ``processing/``. Add new modules to ``_MODULES``.
 from __future__ import annotations
 
 import importlib
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Collection, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -31,6 +31,10 @@ class JobType:
     streams: tuple[str, ...] = ()  # all must have samples in the window (checked at submission)
     optional_streams: tuple[str, ...] = ()
     any_stream: bool = False  # True: load every stream; at least one must have samples
+    # the streams a run with these (validated) params reads, where its params leave some of the above unused
+    # (e.g. star_tracker_accuracy with use_gyro = false): the runner loads only those (required ones always);
+    # None: every stream above
+    input_streams: Callable[[Any], Collection[str]] | None = None
     figures: Callable[[TaskResult, Any], dict[str, Figure]] = field(default=lambda result, params: {})
     description: str = ""
     reference: tuple[str, ...] = ()  # reference kinds the task can use (each optional)

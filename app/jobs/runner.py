@@ -15,8 +15,9 @@ import traceback
 from typing import Any
 
 import numpy as np
+import pyarrow as pa
 import pyarrow.parquet as pq
-from pydantic import ValidationError
+from pydantic import BaseModel, ValidationError
 from sqlalchemy import select
 from sqlalchemy.orm import Session, sessionmaker
 
@@ -65,24 +66,46 @@ class ProgressReporter:
             raise JobCancelled()
 
 
-def stream_names(job_type: JobType) -> tuple[str, ...]:
-    if job_type.any_stream:
-        return tuple(STREAMS)
-    return job_type.streams + job_type.optional_streams
+def stream_names(job_type: JobType, params: BaseModel | None = None) -> tuple[str, ...]:
+    """The streams a job of this type reads: every one it declares (``params`` None: what a job of the type
+    may read, for submission checks and retractions), or, given its validated params, those its
+    ``input_streams`` says this run uses (the required ones always)."""
+    names = tuple(STREAMS) if job_type.any_stream else job_type.streams + job_type.optional_streams
+    if params is None or job_type.input_streams is None:
+        return names
+    used = set(job_type.input_streams(params)) | set(job_type.streams)
+    return tuple(n for n in names if n in used)
 
 
-def load_inputs(session: Session, settings: Settings, job: Job,
-                job_type: JobType) -> tuple[TaskInputs, list[str]]:
-    """The task's inputs and notes on what was done to them (calibration applied)."""
+def table_columns(table: pa.Table) -> dict[str, np.ndarray]:
+    """A stored window's columns as numpy arrays; text columns (the sensor names) as object arrays holding one
+    str per distinct value, not one per row (a day of 10 Hz gyro: 8 bytes a row instead of ~60)."""
+    out: dict[str, np.ndarray] = {}
+    for c in table.column_names:
+        col = table.column(c)
+        if col.null_count == 0 and (pa.types.is_string(col.type) or pa.types.is_large_string(col.type)):
+            encoded = col.combine_chunks().dictionary_encode()
+            values = np.array(encoded.dictionary.to_pylist(), dtype=object)
+            out[c] = values[encoded.indices.to_numpy(zero_copy_only=False)]
+        else:
+            out[c] = col.to_numpy(zero_copy_only=False)
+    return out
+
+
+def load_inputs(session: Session, settings: Settings, job: Job, job_type: JobType,
+                params: BaseModel | None = None) -> tuple[TaskInputs, list[str]]:
+    """The task's inputs and notes on what was done to them (calibration applied); with ``params``, only the
+    streams the run uses (:func:`stream_names`) are read from the store."""
     store = ParquetStore(settings.telemetry_url)
     spacecraft = spacecraft_from_stored(session.scalar(select(SpacecraftConfig.config).where(
         SpacecraftConfig.spacecraft_id == job.spacecraft_id, SpacecraftConfig.version == job.config_version)),
         job.config_version)
     streams: dict[str, dict[str, np.ndarray]] = {}
-    for name in stream_names(job_type):
+    for name in stream_names(job_type, params):
         table = read_window(session, store, job.spacecraft_id, STREAMS[name], job.start_tai_ns, job.end_tai_ns)
         if table.num_rows:
-            streams[name] = {c: table.column(c).to_numpy(zero_copy_only=False) for c in table.column_names}
+            streams[name] = table_columns(table)
+        del table
     missing = [s for s in job_type.streams if s not in streams]
     if missing:
         raise TaskError(f"no {', '.join(missing)} samples in the job window")
@@ -100,7 +123,7 @@ def load_inputs(session: Session, settings: Settings, job: Job,
             table = read_window(session, store, job.spacecraft_id, STREAMS["magnetorquer"], job.start_tai_ns,
                                 job.end_tai_ns)
             if table.num_rows:
-                torquer = {c: table.column(c).to_numpy(zero_copy_only=False) for c in table.column_names}
+                torquer = table_columns(table)
         streams, spacecraft, notes = _apply_calibration(session, job, job_type.applies_calibration, streams,
                                                         spacecraft, torquer)
     else:
@@ -273,10 +296,15 @@ def _execute(job_id: str, settings: Settings, sessions: sessionmaker[Session], a
             except ValidationError as exc:  # valid at submission; a software update may have changed the model
                 raise TaskError(str(exc)) from exc
             progress(0.01, "loading telemetry")
-            inputs, input_notes = load_inputs(session, settings, job, job_type)
+            inputs, input_notes = load_inputs(session, settings, job, job_type, params)
             spacecraft_id = job.spacecraft_id
+        # what the record says of the inputs, taken now: the telemetry is let go once the task has run, before
+        # the figures and artifacts (the largest arrays of a long window need not be held twice)
+        counts = input_counts(inputs)
+        coverage = jsonable(describe_inputs(inputs.streams, inputs.start_tai_ns, inputs.end_tai_ns))
         progress(0.05, "computing")
         result = job_type.run(inputs, params, progress)
+        del inputs
         progress(0.9, "drawing figures")
         figures = job_type.figures(result, params)
         summary = jsonable({"warnings": [w.as_dict() for w in result.warnings], **result.summary})
@@ -285,9 +313,7 @@ def _execute(job_id: str, settings: Settings, sessions: sessionmaker[Session], a
             jobstore.add_artifacts(session, job_id, stored)
             done = jobstore.set_status(
                 session, job_id, "succeeded", allowed_from=("running",), progress=1.0, stage="done",
-                result={"summary": summary, "inputs": input_counts(inputs),
-                        "input_coverage": jsonable(describe_inputs(inputs.streams, inputs.start_tai_ns,
-                                                                   inputs.end_tai_ns)),
+                result={"summary": summary, "inputs": counts, "input_coverage": coverage,
                         "notes": input_notes + list(result.notes)})
             if done and job_type.produces_calibration and summary.get("calibration_complete"):
                 add_version(session, spacecraft_id, job_type.produces_calibration, summary["calibration"], job_id)

@@ -136,10 +136,14 @@ class ScreeningResult:
 
     def reasons(self, stream: str) -> NDArray[np.object_]:
         """(n,) ';'-joined names of the criteria that flagged each row ("" when accepted)."""
-        parts = [np.where(c.flagged, c.name, "") for c in self.criteria if c.stream == stream]
         out = np.full(self.n_rows[stream], "", dtype=object)
-        for p in parts:
-            out = np.where(p == "", out, np.where(out == "", p, out + ";" + p))
+        rows = np.flatnonzero(self.rejected(stream))  # the names are built for the rejected rows only
+        sub = np.full(rows.size, "", dtype=object)
+        for c in self.criteria:
+            if c.stream == stream:
+                hit = c.flagged[rows]
+                sub[hit] = np.where(sub[hit] == "", c.name, sub[hit] + (";" + c.name))
+        out[rows] = sub
         return out
 
     def summary(self) -> dict[str, dict[str, dict[str, Any]]]:

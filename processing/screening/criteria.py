@@ -57,7 +57,7 @@ processing.screening.tools. All are re-exported here.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -94,6 +94,7 @@ from processing.screening.tools import (
     time_grid,
 )
 from processing.spacecraft import Spacecraft
+from processing.tasks import Mapper, serial_map
 from processing.units import NS_PER_S
 
 __all__ = [  # the screening API, wherever it is defined (base, gnss, panels, tools)
@@ -223,9 +224,58 @@ def _screen_star_tracker(col: Collector, cols: Columns, spacecraft: Spacecraft, 
         col.add("quaternion_jump", rows, flagged, stat, float(np.nanmedian(tol)), "rad", "generic")
 
 
+@dataclass(frozen=True)
+class _StreamPart:
+    """One non-GNSS stream to screen (a part for the mapper) with what its criteria need."""
+
+    name: str
+    cols: Columns
+    spacecraft: Spacecraft
+    gyro: Columns | None
+    p: ScreeningParams
+    track: GnssTrack | None
+    env: Environment
+    nav: Mapping[str, Any] | None
+
+
+@dataclass(frozen=True)
+class _StreamScreening:
+    criteria: list[Criterion]
+    n: int
+    notes: list[str]
+    findings: dict[str, Any]
+    st_intervals: list[_Interval]
+
+
+def _screen_stream(part: _StreamPart) -> _StreamScreening:
+    """The criteria of one non-GNSS stream (the GNSS track already known)."""
+    name, cols, p = part.name, part.cols, part.p
+    notes: list[str] = []
+    findings: dict[str, Any] = {}
+    st_intervals: list[_Interval] = []
+    n = len(cols["time_tai_ns"])
+    for c in ("time_tai_ns", "sensor"):
+        if c not in cols:
+            raise ScreeningError(f"stream {name} lacks the column {c!r}")
+    col = Collector(name, n)
+    if name == "magnetometer":
+        _screen_magnetometer(col, cols, p, part.track, part.env, notes, findings)
+    elif name == "panel_currents":
+        screen_panels(col, cols, part.spacecraft, p, part.track, part.env, notes, findings)
+    elif name == "gnss_visibility":
+        _screen_visibility(col, cols, p, part.track, part.nav, notes)
+    elif name == "star_tracker":
+        _screen_star_tracker(col, cols, part.spacecraft, part.gyro, p, findings, st_intervals)
+    else:
+        for _sensor, rows in sensor_groups(cols):
+            generic_checks(col, cols, name, rows, p, findings=findings)
+    return _StreamScreening(col.criteria(), n, notes, findings, st_intervals)
+
+
 def screen(streams: Mapping[str, Columns], spacecraft: Spacecraft, params: ScreeningParams | None = None, *,
            env: Environment | None = None, reference_orbit: Columns | None = None, reference_frame: str = "ITRF",
-           nav: Mapping[str, Any] | None = None, selected: Sequence[str] | None = None) -> ScreeningResult:
+           nav: Mapping[str, Any] | None = None, selected: Sequence[str] | None = None,
+           mapper: Mapper = serial_map) -> ScreeningResult:
     """Apply every criterion that the available data allow to the selected streams.
 
     streams: {stream: columns} as in processing.tasks.TaskInputs (time_tai_ns, sensor, canonical
@@ -233,7 +283,9 @@ def screen(streams: Mapping[str, Columns], spacecraft: Spacecraft, params: Scree
     reference_orbit: optional columns time_tai_ns, x, y, z, vx, vy, vz (m, m/s) in ``reference_frame``
     ("ITRF" or an inertial frame such as "GCRF"/"EME2000"); nav: rinex_nav columns for the
     visibility check. selected: streams to screen (default: all given). GNSS is always screened first
-    when present, because its accepted samples give the position the other models need.
+    when present, because its accepted samples give the position the other models need; the other
+    streams are then independent of each other and screened through ``mapper`` (processing.tasks.Mapper:
+    e.g. across a cluster's workers; the result does not depend on it).
     """
     p = params or ScreeningParams()
     env = env or Environment()
@@ -252,28 +304,20 @@ def screen(streams: Mapping[str, Columns], spacecraft: Spacecraft, params: Scree
             n_rows["gnss"] = gcol.n
     else:
         notes.append("no GNSS stream: criteria needing the spacecraft position are not applied")
-    for name in chosen:
-        if name == "gnss":
-            continue
-        cols = streams[name]
-        n = len(cols["time_tai_ns"])
-        for c in ("time_tai_ns", "sensor"):
-            if c not in cols:
-                raise ScreeningError(f"stream {name} lacks the column {c!r}")
-        col = Collector(name, n)
-        if name == "magnetometer":
-            _screen_magnetometer(col, cols, p, track, env, notes, findings)
-        elif name == "panel_currents":
-            screen_panels(col, cols, spacecraft, p, track, env, notes, findings)
-        elif name == "gnss_visibility":
-            _screen_visibility(col, cols, p, track, nav, notes)
-        elif name == "star_tracker":
-            _screen_star_tracker(col, cols, spacecraft, streams.get("gyro"), p, findings, st_intervals)
-        else:
-            for _sensor, rows in sensor_groups(cols):
-                generic_checks(col, cols, name, rows, p, findings=findings)
-        criteria += col.criteria()
-        n_rows[name] = n
+    parts = [_StreamPart(name, streams[name], spacecraft, streams.get("gyro"), p, track, env, nav)
+             for name in chosen if name != "gnss"]
+    for part, done in zip(parts, mapper(_screen_stream, parts), strict=True):
+        criteria += done.criteria
+        n_rows[part.name] = done.n
+        notes += done.notes
+        st_intervals += done.st_intervals
+        for key, value in done.findings.items():  # per stream: lists in stream order, dicts by stream
+            if isinstance(value, list):
+                findings.setdefault(key, []).extend(value)
+            elif isinstance(value, dict):
+                findings.setdefault(key, {}).update(value)
+            else:
+                findings[key] = value
     if p.transient_consistency and st_intervals and "gyro" in n_rows:
         criteria = _confirmed_transients(criteria, streams["gyro"], st_intervals, findings)
     return ScreeningResult(criteria=criteria, n_rows=n_rows, notes=notes, findings=findings)

@@ -28,6 +28,12 @@ def sample_keys(stream: str, cols: Columns) -> NDArray[np.object_]:
     return np.full(n, "", dtype=object)
 
 
+def _shared_strings(values: ArrayLike) -> NDArray[np.object_]:
+    """``values`` as an object array of str, one str object per distinct value (not one per row)."""
+    codes, uniques = pd.factorize(np.asarray(values, dtype=object), use_na_sentinel=False)
+    return np.array([str(u) for u in uniques], dtype=object)[codes]
+
+
 def flags_table(result: ScreeningResult, streams: Mapping[str, Columns]) -> dict[str, NDArray[Any]]:
     """One row per screened sample: time_tai_ns, stream, sensor, key, accepted, reasons (';'-joined
     criterion names, "" when accepted). Rows in stream order, then the stream's own row order."""
@@ -39,7 +45,7 @@ def flags_table(result: ScreeningResult, streams: Mapping[str, Columns]) -> dict
         rej = result.rejected(name)
         parts["time_tai_ns"].append(np.asarray(cols["time_tai_ns"], dtype=np.int64))
         parts["stream"].append(np.full(n, name, dtype=object))
-        parts["sensor"].append(np.asarray(cols["sensor"], dtype=object).astype(str).astype(object))
+        parts["sensor"].append(_shared_strings(cols["sensor"]))
         parts["key"].append(sample_keys(name, cols))
         parts["accepted"].append(~rej)
         parts["reasons"].append(result.reasons(name))

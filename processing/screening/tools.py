@@ -18,12 +18,18 @@ class ScreeningError(ValueError):
 # Generic building blocks.
 
 
+ROLLING_CHUNK_ROWS = 1 << 15
+"""Rows of one block of :func:`rolling_median`: its windows are copied, (rows, d, 2 h + 1) floats per block,
+so the memory it needs is bounded by the block, not by the stream (~10 MB for 3 columns, h = 5)."""
+
+
 def rolling_median(x: ArrayLike, half_window: int, exclude: ArrayLike | None = None, *,
-                   leave_out_centre: bool = False) -> NDArray[np.float64]:
+                   leave_out_centre: bool = False, chunk_rows: int = ROLLING_CHUNK_ROWS) -> NDArray[np.float64]:
     """Centred running median over +-half_window samples, per column, ignoring excluded and NaN rows.
 
     x: (n,) or (n, d). Windows shrink at the ends. leave_out_centre: the median of the neighbours
-    only (the sample itself excluded). Returns the same shape.
+    only (the sample itself excluded). Returns the same shape. Computed in blocks of ``chunk_rows`` rows
+    (each row's median is its own: the result does not depend on the block size).
     """
     a = np.asarray(x, dtype=np.float64)
     two_d = a.ndim == 2
@@ -32,12 +38,16 @@ def rolling_median(x: ArrayLike, half_window: int, exclude: ArrayLike | None = N
         a2 = np.where(np.asarray(exclude, dtype=bool)[:, None], np.nan, a2)
     pad = np.full((half_window, a2.shape[1]), np.nan)
     padded = np.concatenate([pad, a2, pad])
-    win = sliding_window_view(padded, 2 * half_window + 1, axis=0)  # (n, d, w)
-    if leave_out_centre:  # the neighbours only, in an array of our own that is then sorted in place
-        own = np.concatenate([win[:, :, :half_window], win[:, :, half_window + 1:]], axis=-1)
-        med = nanmedian_last_axis(own, overwrite=True)
-    else:
-        med = nanmedian_last_axis(win)  # all-NaN windows (long rejected runs) give NaN
+    med = np.empty(a2.shape, dtype=np.float64)
+    step = max(1, int(chunk_rows))
+    for lo in range(0, a2.shape[0], step):
+        hi = min(lo + step, a2.shape[0])
+        win = sliding_window_view(padded[lo:hi + 2 * half_window], 2 * half_window + 1, axis=0)  # (rows, d, w)
+        if leave_out_centre:  # the neighbours only, in an array of our own that is then sorted in place
+            own = np.concatenate([win[:, :, :half_window], win[:, :, half_window + 1:]], axis=-1)
+            med[lo:hi] = nanmedian_last_axis(own, overwrite=True)
+        else:
+            med[lo:hi] = nanmedian_last_axis(win)  # all-NaN windows (long rejected runs) give NaN
     return med if two_d else med[:, 0]
 
 

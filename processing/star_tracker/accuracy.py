@@ -109,7 +109,7 @@ from processing.star_tracker.smoothing import (
     split_segments,
 )
 from processing.star_tracker.whiteness import ResidualSeries, Whiteness, sigma_interval, whiteness_test
-from processing.tasks import Progress
+from processing.tasks import Mapper, Progress, serial_map
 from processing.units import NS_PER_S
 
 __all__ = [
@@ -244,13 +244,19 @@ class _Segments:
     rejection: OutlierRejection
 
 
+def _smooth_part(part: tuple[slice, NDArray, int, NDArray, int | None, Method]) -> SegmentSmoothing:
+    """One segment's steps 1-2 (a part for the mapper): :func:`smooth_segment` of its arguments."""
+    return smooth_segment(*part)
+
+
 def _smooth_segments(
     inp: _Inputs, harmonics: int | None, segment_max_s: float, max_gap_s: float, method: Method,
-    outlier_alpha: float,
+    outlier_alpha: float, mapper: Mapper = serial_map,
 ) -> _Segments:
-    """Steps 1-2b: segments, mean quaternion, residual MRPs, raw smoothing (003 §1.3), outliers."""
+    """Steps 1-2b: segments, mean quaternion, residual MRPs, raw smoothing (003 §1.3), outliers; the
+    segments' smoothings through ``mapper`` (independent; same results on any mapper)."""
     t_ns = inp.t_ns
-    segments: list[SegmentSmoothing] = []
+    parts: list[tuple[slice, NDArray, int, NDArray, int | None, Method]] = []
     notes: list[str] = []
     for sl in split_segments(t_ns, segment_max_s, max_gap_s):
         n = sl.stop - sl.start
@@ -262,13 +268,14 @@ def _smooth_segments(
                 f"harmonics must be <= N - 2 = {n - 2} for a segment of {n} samples, got {harmonics}"
             )
         t0_ns = int(t_ns[sl.start])
-        seg = smooth_segment(sl, seconds_since(t_ns[sl], t0_ns), t0_ns, inp.q[sl], harmonics, method)
+        parts.append((sl, seconds_since(t_ns[sl], t0_ns), t0_ns, inp.q[sl], harmonics, method))
+    segments: list[SegmentSmoothing] = mapper(_smooth_part, parts)
+    for seg in segments:
         if np.max(np.linalg.norm(seg.z, axis=-1)) > 0.5:
             notes.append(
-                f"segment from row {sl.start} turns by more than 4 atan(0.5) ~ 106 deg from its mean: "
+                f"segment from row {seg.sl.start} turns by more than 4 atan(0.5) ~ 106 deg from its mean: "
                 "the small-z approximation of 003 §1.3 is poor; shorten segment_max_s"
             )
-        segments.append(seg)
     if not segments:
         raise StarTrackerAccuracyError(
             f"no segment with at least {MIN_SEGMENT_SAMPLES} star-tracker samples (got {t_ns.size} samples)"
@@ -388,6 +395,7 @@ def analyze_star_tracker_accuracy(
     line_false_alarm: float = 1e-3,
     outlier_alpha: float = OUTLIER_ALPHA,
     progress: Progress | None = None,
+    mapper: Mapper = serial_map,
 ) -> StarTrackerAccuracy:
     """Accuracy of a star tracker from its own quaternions, with gyro rates when given (003 §1.3-1.5).
 
@@ -397,11 +405,13 @@ def analyze_star_tracker_accuracy(
     segment_max_s, max_gap_s [s]: segmentation; method: "auto" | "dst" | "lstsq" for the smoother;
     line_false_alarm: false-alarm probability of the line detector per spectrum and axis;
     outlier_alpha: probability that clean data lose a sample to the outlier rejection (0: none rejected).
+    mapper: how the independent per-segment smoothings (star tracker, gyro) run (processing.tasks.Mapper;
+    e.g. across a cluster's workers); the results do not depend on it.
     See the module docstring for every step. Returns :class:`StarTrackerAccuracy`.
     """
     report = progress or _noop
     inp = _check_inputs(time_tai_ns, q_IS, q_BS, harmonics)
-    smoothed = _smooth_segments(inp, harmonics, segment_max_s, max_gap_s, method, outlier_alpha)  # 1-2b
+    smoothed = _smooth_segments(inp, harmonics, segment_max_s, max_gap_s, method, outlier_alpha, mapper)  # 1-2b
     segments, notes = smoothed.segments, list(smoothed.notes)
     report(0.3, "smoothing")
     cutoff_hz = max(seg.fit_raw.cutoff_hz for seg in segments)
@@ -413,7 +423,7 @@ def analyze_star_tracker_accuracy(
                          for s in segments)
         notes += coverage_notes(coverage)
         gyro = analyze_gyro(segments, [c.idx if c.used else None for c in coverage], g_ns, w_B_gyro, inp.dcm_BS,
-                            cutoff_hz, inp.sample_period_s, line_false_alarm, smoothed.rejection.scale_rad)
+                            cutoff_hz, inp.sample_period_s, line_false_alarm, smoothed.rejection.scale_rad, mapper)
     report(0.5, "gyro lines")
     motion = gyro.motion_S if gyro is not None else tuple(np.zeros((s.sl.stop - s.sl.start, 3)) for s in segments)
     corrected = tuple(correct_segment(seg, m) for seg, m in zip(segments, motion, strict=True))
@@ -429,7 +439,7 @@ def analyze_star_tracker_accuracy(
     report(0.7, "residuals")
     cmp = None if gyro is None else gyro_comparison(  # 5
         segments, [c.fit for c in corrected], gyro.fits, gyro.time_tai_ns, gyro.w_B_rad_s, inp.dcm_BS, sig.sigma,
-        gyro.lines.fits,
+        gyro.lines.fits, mapper,
     )
     if gyro is not None and cmp is None:
         notes.append("gyro comparison left out: the final harmonic count needs more gyro samples than any segment has")

@@ -40,6 +40,7 @@ from processing.signal.spectral import alias_frequency
 from processing.signal.spectral_lines import SinusoidFit, find_lines, fit_sinusoids, separable_frequencies
 from processing.star_tracker.gyro_coverage import enough_gyro_samples
 from processing.star_tracker.smoothing import SegmentSmoothing, rate_from_mrp, seconds_since, sensor_axis_residuals
+from processing.tasks import Mapper, serial_map
 
 __all__ = [
     "GyroAnalysis",
@@ -143,6 +144,35 @@ def fit_gyro_segment(
     m_g = gyro_harmonics(star_tracker_fit.harmonics, star_tracker_fit.span_s, tg)
     gfit = fit_sine_series(tg, w_B[idx], m_g)
     return GyroSegmentFit(idx, tg, m_g, gfit, gfit.residuals(w_B[idx]))
+
+
+def _gyro_part(part: tuple[NDArray, NDArray, int]) -> tuple[SineSeriesFit, NDArray]:
+    """One segment's gyro smoothing (a part for the mapper): times [s], rates (K, 3), harmonics."""
+    tg, w, m_g = part
+    gfit = fit_sine_series(tg, w, m_g)
+    return gfit, gfit.residuals(w)
+
+
+def _fit_gyro_segments(segments: Sequence[SegmentSmoothing], index: Sequence[NDArray | None], g_ns: NDArray,
+                       w_B: NDArray, mapper: Mapper) -> tuple[GyroSegmentFit | None, ...]:
+    """:func:`fit_gyro_segment` of every covered segment, the smoothings through ``mapper`` (same results)."""
+    parts, meta = [], []
+    for seg, idx in zip(segments, index, strict=True):
+        if idx is None:
+            continue
+        tg = seconds_since(g_ns[idx], seg.t0_ns)
+        m_g = gyro_harmonics(seg.fit_raw.harmonics, seg.fit_raw.span_s, tg)
+        parts.append((tg, w_B[idx], m_g))
+        meta.append((idx, tg, m_g))
+    done = iter(zip(meta, mapper(_gyro_part, parts), strict=True))
+    out: list[GyroSegmentFit | None] = []
+    for idx in index:
+        if idx is None:
+            out.append(None)
+            continue
+        (i, tg, m_g), (gfit, resid) = next(done)
+        out.append(GyroSegmentFit(i, tg, m_g, gfit, resid))
+    return tuple(out)
 
 
 def find_gyro_lines(
@@ -310,16 +340,17 @@ class GyroAnalysis:
 def analyze_gyro(
     segments: Sequence[SegmentSmoothing], index: Sequence[NDArray | None], g_ns: NDArray, w_B: NDArray,
     dcm_BS: NDArray, cutoff_hz: float, sample_period_s: float, false_alarm: float, scale_S: NDArray | None = None,
+    mapper: Mapper = serial_map,
 ) -> GyroAnalysis | None:
     """Steps 5 and 7 for the star-tracker segments and gyro rates w_B (K, 3) at g_ns (K,): smoothing per
     segment, lines above cutoff_hz, the attitude oscillation per segment of the lines coherent with the
     star tracker (scale_S (3,) rad: its noise scale per sensor axis for the coherence regression; None:
     every line removed, no test). index: per segment the gyro samples to use, None where the gyro does not
-    cover it (processing.star_tracker.gyro_coverage). None when it covers no segment."""
+    cover it (processing.star_tracker.gyro_coverage). None when it covers no segment. ``mapper``: how the
+    per-segment gyro smoothings are run (processing.tasks.Mapper)."""
     if all(idx is None for idx in index):
         return None
-    fits = tuple(None if idx is None else fit_gyro_segment(seg, idx, g_ns, w_B, seg.fit_raw)
-                 for seg, idx in zip(segments, index, strict=True))
+    fits = _fit_gyro_segments(segments, index, g_ns, w_B, mapper)
     lines = find_gyro_lines([f for f in fits if f is not None], g_ns, cutoff_hz, sample_period_s, false_alarm)
     per_line = [segment_line_motions(seg, f, lines.fits, dcm_BS) for seg, f in zip(segments, fits, strict=True)]
     if scale_S is None:
@@ -352,10 +383,17 @@ class _SegmentComparison:
     n_gyro: int
 
 
-def _compare_segment(
-    seg: SegmentSmoothing, fit: SineSeriesFit, gf: GyroSegmentFit, g_ns: NDArray, dcm_BS: NDArray,
-    sigma_S: NDArray, line_fits: Sequence[SinusoidFit],
-) -> _SegmentComparison:
+_ComparePart = tuple[SegmentSmoothing, SineSeriesFit, GyroSegmentFit, NDArray, "NDArray | None", NDArray, NDArray,
+                     Sequence[SinusoidFit]]
+
+
+def _compare_segment(part: _ComparePart) -> _SegmentComparison:
+    """One segment of the comparison (a part for the mapper): the segment, its final star-tracker fit, its gyro
+    fit, the gyro times of that fit (K,), the gyro rates (K, 3) when the fit must be redone with the final
+    fit's cutoff (else None), dcm_BS, the sensor sigma and the gyro lines."""
+    seg, fit, gf, g_seg, w_seg, dcm_BS, sigma_S, line_fits = part
+    if w_seg is not None:
+        gf = fit_gyro_segment(seg, np.arange(g_seg.size), g_seg, w_seg, fit)
     tg, gfit, resid = gf.t_s, gf.fit, gf.residuals
     rss_s = np.sum(resid**2, axis=0)
     seg_lines = segment_lines(line_fits, tg)
@@ -367,7 +405,7 @@ def _compare_segment(
     st = rate_from_mrp(fit.evaluate(tg_in), fit.derivative(tg_in)) @ dcm_BS.T
     off = np.mean(g_sm - st, axis=0)
     return _SegmentComparison(
-        time_tai_ns=g_ns[gf.idx][inside], w_gyro=g_sm - off, w_st=st, offset=off, rss_smoothing=rss_s,
+        time_tai_ns=g_seg[inside], w_gyro=g_sm - off, w_st=st, offset=off, rss_smoothing=rss_s,
         dof_smoothing=gfit.dof, rss_noise=np.sum(resid**2, axis=0), dof_noise=gfit.dof - 2 * seg_lines.size,
         var_st_B=rate_noise_factor(seg.solver, fit) * (dcm_BS**2 @ sigma_S**2), n_inside=tg_in.size,
         n_parameters=gf.harmonics + 2, n_gyro=tg.size,
@@ -383,22 +421,24 @@ def gyro_comparison(
     dcm_BS: NDArray,
     sigma_S: NDArray,
     line_fits: Sequence[SinusoidFit],
+    mapper: Mapper = serial_map,
 ) -> GyroComparison | None:
     """Step 5 (003 §1.4): smoothed gyro (the cutoff of each segment's final fit ``fits``) against the
     star-tracker rates, offsets matched. The gyro fits of step 7 are reused when the harmonic count is
     the same; segments without gyro samples (None) or with too few for the final harmonic count are left
-    out (None when that leaves none)."""
-    parts = []
+    out (None when that leaves none). The segments go through ``mapper``."""
+    todo: list[_ComparePart] = []
     for seg, fit, gf in zip(segments, fits, gyro_fits, strict=True):
         if gf is None:
             continue
-        if gyro_harmonics(fit.harmonics, fit.span_s, gf.t_s) != gf.harmonics:
-            if not enough_gyro_samples(gf.idx.size, gyro_harmonics(fit.harmonics, fit.span_s, gf.t_s)):
-                continue  # the final M needs more gyro samples than the segment has (criterion ``samples``)
-            gf = fit_gyro_segment(seg, gf.idx, g_ns, w_B_gyro, fit)
-        parts.append(_compare_segment(seg, fit, gf, g_ns, dcm_BS, sigma_S, line_fits))
-    if not parts:
+        harmonics = gyro_harmonics(fit.harmonics, fit.span_s, gf.t_s)
+        refit = harmonics != gf.harmonics
+        if refit and not enough_gyro_samples(gf.idx.size, harmonics):
+            continue  # the final M needs more gyro samples than the segment has (criterion ``samples``)
+        todo.append((seg, fit, gf, g_ns[gf.idx], w_B_gyro[gf.idx] if refit else None, dcm_BS, sigma_S, line_fits))
+    if not todo:
         return None
+    parts: list[_SegmentComparison] = mapper(_compare_segment, todo)
     rss_s, rss_n = np.zeros(3), np.zeros(3)
     for p in parts:
         rss_s += p.rss_smoothing

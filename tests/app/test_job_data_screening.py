@@ -89,3 +89,11 @@ def test_streams_parameter_reference_orbit_and_errors() -> None:
     with pytest.raises(ValidationError):
         Params(unknown=1)
     assert JOB.reference == ("rinex_nav", "reference_orbit") and JOB.any_stream
+
+
+def test_only_the_chosen_streams_and_what_their_criteria_need_are_read() -> None:
+    from app.jobs.runner import stream_names
+
+    assert stream_names(JOB, Params()) == stream_names(JOB)
+    assert set(stream_names(JOB, Params(streams=["magnetometer"]))) == {"magnetometer", "gnss"}
+    assert set(stream_names(JOB, Params(streams=["star_tracker"]))) == {"star_tracker", "gyro", "gnss"}

@@ -20,6 +20,7 @@ from storage.calibrations import add_version
 from storage.db import make_engine, session_factory
 from storage.models import Job
 from tests.app.helpers import SQLITE_ONLY, make_spacecraft
+from tests.app.test_jobs_api import upload_columns
 
 pytestmark = SQLITE_ONLY
 
@@ -138,3 +139,67 @@ def test_input_errors_fail_with_their_message_other_errors_are_internal_and_logg
     assert error == "internal error: ValueError: operands could not be broadcast together"
     logged = "\n".join(r.getMessage() for r in caplog.records)
     assert "job job-bug crashed" in logged and "Traceback" in logged and "in bug" in logged
+
+
+class GyroChoice(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    use_gyro: bool = True
+
+
+def streams_seen(inputs: TaskInputs, params: GyroChoice, progress) -> TaskResult:  # noqa: ANN001
+    return TaskResult(summary={"streams": sorted(inputs.streams)})
+
+
+def test_a_stream_the_params_leave_unused_is_not_read(client, settings, monkeypatch) -> None:
+    """input_streams: the runner reads only what this run uses (the required streams always), through the real
+    store; without the declaration, or for submission checks (no params), every declared stream."""
+    declared = JobType(name="picky", title="picky", paper="", params=GyroChoice, run=streams_seen,
+                       streams=("star_tracker",), optional_streams=("gyro", "gnss"),
+                       input_streams=lambda p: ("gyro",) if p.use_gyro else ())
+    monkeypatch.setattr(runner, "registry", lambda: {"picky": declared})
+    make_spacecraft(client, "sat1", CONFIG)
+    t = START + np.arange(5, dtype=np.int64) * 10**9
+    upload_columns(client, "sat1", "star_tracker", {"time_tai_ns": t, "sensor": ["st1"] * 5, "q0": np.ones(5),
+                                                    "q1": np.zeros(5), "q2": np.zeros(5), "q3": np.zeros(5)})
+    upload_columns(client, "sat1", "gyro", {"time_tai_ns": t, "sensor": ["g1"] * 5, "wx": np.zeros(5),
+                                            "wy": np.zeros(5), "wz": np.full(5, 1e-3)})
+    read: list[str] = []
+    real_read = runner.read_window
+    monkeypatch.setattr(runner, "read_window", lambda s, store, sc, spec, *a: read.append(spec.name) or real_read(
+        s, store, sc, spec, *a))
+    sessions = session_factory(engine := make_engine(settings.database_url))
+    try:
+        summaries = {}
+        for use_gyro in (True, False):
+            job_id = f"job-gyro-{use_gyro}"
+            with sessions.begin() as session:
+                session.add(Job(id=job_id, type="picky", spacecraft_id=1, config_version=1, start_tai_ns=START,
+                                end_tai_ns=START + 10**12, params={"use_gyro": use_gyro}, status="running",
+                                stage="starting", progress=0.0, software_version="test", cancel_requested=False,
+                                reference={}))
+            assert runner.execute(job_id, settings) == "succeeded"
+            with sessions() as session:
+                job = session.get(Job, job_id)
+                summaries[use_gyro] = (job.result["summary"]["streams"], sorted(job.result["inputs"]))
+            summaries[use_gyro] += (sorted(read),)
+            read.clear()
+    finally:
+        engine.dispose()
+    assert summaries[True] == (["gyro", "star_tracker"], ["gyro", "star_tracker"], ["gyro", "star_tracker"])
+    assert summaries[False] == (["star_tracker"], ["star_tracker"], ["star_tracker"])
+    assert runner.stream_names(declared) == ("star_tracker", "gyro", "gnss")
+
+
+def test_stored_columns_become_the_same_arrays_with_one_str_per_sensor() -> None:
+    import pyarrow as pa
+
+    chunks = [pa.table({"time_tai_ns": pa.array(t, pa.int64()), "sensor": pa.array(s), "wx": pa.array(w)})
+              for t, s, w in (([1, 2, 3], ["g1", "g2", "g1"], [0.5, 1.5, 2.5]), ([4], ["g2"], [3.5]))]
+    table = pa.concat_tables(chunks)
+    cols = runner.table_columns(table)
+    assert cols["sensor"].dtype == object and cols["sensor"].tolist() == ["g1", "g2", "g1", "g2"]
+    assert all(type(x) is str for x in cols["sensor"]) and cols["sensor"][0] is cols["sensor"][2]
+    np.testing.assert_array_equal(cols["time_tai_ns"], [1, 2, 3, 4])
+    np.testing.assert_array_equal(cols["wx"], [0.5, 1.5, 2.5, 3.5])
+    one = runner.table_columns(pa.table({"sensor": pa.array(["st1"] * 3)}))["sensor"]
+    assert one.shape == (3,) and one.tolist() == ["st1"] * 3

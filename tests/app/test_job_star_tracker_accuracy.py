@@ -239,3 +239,10 @@ def test_multi_head_mode_on_two_heads():
         JOB.run(inputs, JOB.params(heads=["st1"]), no_progress)
     with pytest.raises(TaskError, match="no star_tracker samples"):
         JOB.run(inputs, JOB.params(heads=["st1", "st9"]), no_progress)
+
+
+def test_the_gyro_is_not_read_with_use_gyro_false():
+    from app.jobs.runner import stream_names
+
+    assert stream_names(JOB, JOB.params(use_gyro=False)) == ("star_tracker",)
+    assert stream_names(JOB, JOB.params()) == stream_names(JOB) == ("star_tracker", "gyro")

@@ -8,16 +8,19 @@ inputs with :func:`processing.screening.flags.filter_streams` and the stored ``f
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from typing import Any, Literal
 
 import numpy as np
 from matplotlib.figure import Figure
 from pydantic import BaseModel, ConfigDict, Field
 
+from app.jobs.partitions import map_partitions
 from app.jobs.registry import JobType
 from app.reports.headline import Answer
 from processing.screening.criteria import ScreeningParams, screen
 from processing.screening.flags import flags_table
+from processing.streams import STREAMS
 from processing.tasks import Progress, ResultWarning, TaskError, TaskInputs, TaskResult
 from processing.units import NS_PER_S
 
@@ -76,6 +79,21 @@ def _screening_params(p: Params) -> ScreeningParams:
     )
 
 
+def stream_map(func: Callable[[Any], Any], parts: Sequence[Any]) -> list[Any]:
+    """The streams (after GNSS) screened across the executor's workers (app.jobs.partitions)."""
+    return map_partitions(func, parts, stage="streams")
+
+
+def input_streams(params: Params) -> tuple[str, ...]:
+    """The streams a run reads: every one by default; with ``streams``, those, GNSS (its accepted states give
+    the position the other criteria need) and, for the star tracker, the gyro (the rate its jumps are judged
+    with)."""
+    if params.streams is None:
+        return tuple(STREAMS)
+    extra = ("gnss",) + (("gyro",) if "star_tracker" in params.streams else ())
+    return tuple(dict.fromkeys([*params.streams, *extra]))
+
+
 def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
     present = [s for s in SCREENABLE if s in inputs.streams and len(inputs.streams[s]["time_tai_ns"])]
     selected = present if params.streams is None else [s for s in params.streams if s in present]
@@ -98,7 +116,8 @@ def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
     nav_ref = inputs.reference.get("rinex_nav")
     progress(0.1, "screening")
     result = screen(inputs.streams, inputs.spacecraft, _screening_params(params), reference_orbit=reference,
-                    reference_frame=frame, nav=None if nav_ref is None else nav_ref.columns, selected=selected)
+                    reference_frame=frame, nav=None if nav_ref is None else nav_ref.columns, selected=selected,
+                    mapper=stream_map)
     notes += result.notes
     progress(0.7, "flags table")
     crit = result.summary()
@@ -249,7 +268,7 @@ def figures(result: TaskResult, params: Params) -> dict[str, Figure]:
 
 JOB = JobType(
     name="data_screening", title="Telemetry screening (002 eqs. 15-17)", paper="002 eqs. 15-17", params=Params,
-    run=run, any_stream=True, figures=figures, reference=("rinex_nav", "reference_orbit"),
+    run=run, any_stream=True, input_streams=input_streams, figures=figures, reference=("rinex_nav", "reference_orbit"),
     description="Flags every sample of GNSS, magnetometer, panel-current, visibility and other streams with the "
                 "criteria it fails: energy integral (eq. 15, J2-aware), field magnitude against IGRF-14 (eq. 16), "
                 "panel currents against the shadow/unit-sun models (eq. 17), orbit plane, kinematic and velocity "

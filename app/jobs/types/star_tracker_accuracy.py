@@ -10,12 +10,14 @@ check (app.jobs.plausibility.check_heads) when gyro data are used.
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from typing import Annotated, Any, Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
 from app.jobs import multi_head
+from app.jobs.partitions import map_partitions
 from app.jobs.plausibility import HeadSamples, check_heads
 from app.jobs.registry import JobType
 from app.jobs.types.star_tracker_accuracy_figures import figures
@@ -88,6 +90,8 @@ def _gyro(inputs: TaskInputs, notes: list[str]) -> tuple[np.ndarray, np.ndarray,
         notes.append(f"several gyro sensors {list(sensors)}: used {sensors[0]!r}")
     g = inputs.gyro(sensors[0])
     keep = np.concatenate([[True], np.diff(g.time_tai_ns) > 0])
+    if np.all(keep):  # the usual case: no copy of a long window's rates
+        return g.time_tai_ns, g.w_G_rad_s, inputs.spacecraft.gyro_mounting()
     return g.time_tai_ns[keep], g.w_G_rad_s[keep], inputs.spacecraft.gyro_mounting()
 
 
@@ -300,6 +304,16 @@ def _tables(r: StarTrackerAccuracy) -> dict[str, dict[str, np.ndarray]]:
     return tables
 
 
+def segment_map(func: Callable[[Any], Any], parts: Sequence[Any]) -> list[Any]:
+    """The per-segment smoothings split across the executor's workers (app.jobs.partitions)."""
+    return map_partitions(func, parts, stage="segments")
+
+
+def input_streams(params: Params) -> tuple[str, ...]:
+    """The streams a run reads: the gyro only with use_gyro (the runner does not load it otherwise)."""
+    return ("star_tracker", "gyro") if params.use_gyro else ("star_tracker",)
+
+
 def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
     progress(0.02, "loading")
     heads = multi_head.head_names(inputs, params.heads) if params.heads else []
@@ -321,6 +335,7 @@ def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
             q_BG=(1.0, 0.0, 0.0, 0.0) if gyro is None else gyro[2],
             harmonics=None if params.harmonics == "auto" else int(params.harmonics),
             progress=lambda f, stage: progress(0.05 + 0.85 * f, stage),
+            mapper=segment_map,
         )
     except StarTrackerAccuracyError as exc:
         raise TaskError(str(exc)) from exc
@@ -363,6 +378,7 @@ JOB = JobType(
     run=run,
     streams=("star_tracker",),
     optional_streams=("gyro",),
+    input_streams=input_streams,
     figures=figures,
     description=(
         "Per-axis accuracy of a star tracker from its quaternions (003 §1.3-1.5): mean quaternion, Rodrigues "

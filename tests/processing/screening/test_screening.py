@@ -239,3 +239,42 @@ def test_rolling_median_is_numpys_nanmedian_of_the_windows():
     win[:, :, 3] = np.nan
     with pytest.warns(RuntimeWarning):
         np.testing.assert_array_equal(med, np.nanmedian(win, axis=-1))
+
+
+def test_the_streams_after_gnss_give_the_same_result_on_any_mapper() -> None:
+    """The non-GNSS streams are screened through the mapper (a cluster's workers in a job): run in reverse
+    order on other threads, the criteria, notes and findings are those of the serial run, in its order."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    sc, serial = screened(0)
+    names: list[list[str]] = []
+
+    def reversed_threads(func, parts):  # noqa: ANN001, ANN202
+        names.append([p.name for p in parts])
+        with ThreadPoolExecutor(2) as pool:
+            return list(reversed(list(pool.map(func, list(reversed(parts))))))
+
+    mapped = scr.screen(sc.streams, Spacecraft.from_json(sc.config), nav=nav(), mapper=reversed_threads)
+    assert len(names) == 1 and len(names[0]) >= 3 and "gnss" not in names[0]
+    assert [(c.stream, c.name) for c in mapped.criteria] == [(c.stream, c.name) for c in serial.criteria]
+    for a, b in zip(mapped.criteria, serial.criteria, strict=True):
+        for field in ("flagged", "applied", "statistic"):
+            np.testing.assert_array_equal(getattr(a, field), getattr(b, field))
+    assert (mapped.n_rows, mapped.notes, mapped.findings) == (serial.n_rows, serial.notes, serial.findings)
+
+
+def test_the_rolling_median_in_blocks_is_the_whole_one() -> None:
+    """rolling_median works in blocks of rows (bounded memory): any block size gives the same medians."""
+    from processing.screening.tools import rolling_median
+
+    rng = np.random.default_rng(4)
+    x = rng.normal(size=(1000, 3))
+    x[rng.random(1000) < 0.05, 1] = np.nan
+    exclude = rng.random(1000) < 0.1
+    whole = rolling_median(x, 5, exclude, leave_out_centre=True, chunk_rows=10**6)
+    for rows in (1, 7, 64, 999):
+        np.testing.assert_array_equal(rolling_median(x, 5, exclude, leave_out_centre=True, chunk_rows=rows), whole)
+    one_d = rolling_median(x[:, 0], 3, chunk_rows=10**6)
+    np.testing.assert_array_equal(rolling_median(x[:, 0], 3, chunk_rows=13), one_d)
+    neighbours = [*range(495, 500), *range(501, 506)]
+    assert whole[500, 0] == np.median(x[neighbours, 0][~exclude[neighbours]])

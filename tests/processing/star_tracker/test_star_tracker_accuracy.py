@@ -266,3 +266,29 @@ def test_bad_inputs():
         analyze_star_tracker_accuracy(t_st, q, sc.truth.q_BS, gyro_time_tai_ns=t_g, w_G_rad_s=w[:, :2])
     with pytest.raises(StarTrackerAccuracyError, match="at least 12 star-tracker samples"):
         analyze_star_tracker_accuracy(t_st[:5], q[:5], sc.truth.q_BS)
+
+
+def test_the_per_segment_smoothings_give_the_same_result_on_any_mapper():
+    """The per-segment smoothings (star tracker, gyro) and gyro comparisons go through the mapper (a cluster's
+    workers in a job): run in reverse order on other threads, the parts come back in place, outputs bit-identical."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    sc = simulate(3, duration_s=1800.0)
+    t_st, q, t_g, w = _streams(sc)
+    calls: list[int] = []
+
+    def reversed_threads(func, parts):  # noqa: ANN001, ANN202
+        calls.append(len(parts))
+        with ThreadPoolExecutor(2) as pool:
+            return list(reversed(list(pool.map(func, list(reversed(parts))))))
+
+    kw = {"gyro_time_tai_ns": t_g, "w_G_rad_s": w, "segment_max_s": 400.0}
+    serial = analyze_star_tracker_accuracy(t_st, q, sc.truth.q_BS, **kw)
+    mapped = analyze_star_tracker_accuracy(t_st, q, sc.truth.q_BS, mapper=reversed_threads, **kw)
+    assert len(calls) == 3 and calls[0] == len(serial.segments) >= 4  # star tracker, gyro, comparison
+    for name in ("z_fit", "residuals_rad", "residuals_smoothing_rad", "motion_rad", "w_B_rad_s", "sigma_rad",
+                 "sigma_smoothing_rad", "sigma_robust_rad", "outlier"):
+        np.testing.assert_array_equal(getattr(mapped, name), getattr(serial, name), err_msg=name)
+    assert mapped.gyro is not None and serial.gyro is not None
+    np.testing.assert_array_equal(mapped.gyro.rms_diff_rad_s, serial.gyro.rms_diff_rad_s)
+    assert [x.freq_hz for x in mapped.lines] == [x.freq_hz for x in serial.lines]
