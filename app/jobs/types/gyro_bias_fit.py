@@ -317,9 +317,11 @@ def _gyro_segments(inputs: TaskInputs, params: Params) -> list[tuple[int, int]]:
         names = inputs.sensors("gyro")
         if len(names) != 1:
             return []
-        t = np.unique(inputs.gyro().time_tai_ns)
+        t = inputs.gyro().time_tai_ns
     except TaskError:
         return []
+    if not np.all(t[1:] > t[:-1]):  # stored in time order: the sort of np.unique only when it is not
+        t = np.unique(t)
     if t.size < 2:
         return []
     cut = np.flatnonzero(np.diff(t) > params.max_gyro_gap_s * NS_PER_S)
