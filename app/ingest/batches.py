@@ -1,10 +1,10 @@
-"""Decode an upload body in bounded record batches (issue 24): the streaming counterpart of
-:func:`app.ingest.parse.parse_body`, with the same limits, errors and column types.
+"""Decode an upload body in bounded record batches (issue 24), or whole (:func:`parse_body`), with the
+limits of :class:`app.ingest.parse.DecodeLimits`.
 
 :func:`iter_tables` yields ``(first upload row, table)`` pairs of at most ``batch_rows`` rows:
 Parquet by ``ParquetFile.iter_batches`` (rows, columns and decoded size checked from the footer first),
 an Arrow IPC stream batch by batch, CSV through pyarrow's streaming reader with a bounded block size
-(every column as text, as in parse_body; rows counted from the line ends before decoding), JSON records
+(every column as text; rows counted from the line ends before decoding), JSON records
 (size-capped) turned into columns one slice of records at a time, so the cost is records x columns once.
 """
 
@@ -23,6 +23,7 @@ from app.ingest.errors import RowError, UploadError
 from app.ingest.parse import (
     ARROW_TYPES,
     CSV_TYPES,
+    NO_LIMITS,
     PARQUET_TYPES,
     SUPPORTED_TYPES,
     DecodeLimits,
@@ -37,7 +38,9 @@ from app.ingest.spool import Body
 CSV_BYTES_PER_ROW = 16  # CSV reader block = batch_rows x this (at least MIN_CSV_BLOCK): its text and the
 # parsed string columns of a block in flight weigh several times the numbers of a batch
 MIN_CSV_BLOCK = 1 << 16
+MAX_CSV_BLOCK = 1 << 26
 MAX_HEADER_BYTES = 1 << 20
+WHOLE = 1 << 40  # batch_rows of parse_body: one batch (CSV: one per reader block)
 
 Batches = Iterator[tuple[int, pa.Table]]
 
@@ -65,8 +68,17 @@ def iter_tables(body: Body, content_type: str | None, limits: DecodeLimits, batc
     return _numbered(batches, what)
 
 
+def parse_body(body: bytes, content_type: str | None, limits: DecodeLimits = NO_LIMITS) -> pa.Table:
+    """The whole upload as one table (an upload whose times go back is validated at once, so that its 422 lists
+    every such row); the errors of :func:`iter_tables`."""
+    tables = [t for _, t in iter_tables(Body.from_bytes(body), content_type, limits, WHOLE)]
+    if not tables:
+        raise UploadError([RowError(None, None, "the upload has no rows")])
+    return pa.concat_tables(tables)
+
+
 def _numbered(tables: Iterator[pa.Table], what: str) -> Batches:
-    """Number the rows; a decoding failure becomes the UploadError parse_body gives."""
+    """Number the rows; a decoding failure becomes an UploadError naming the format."""
     first = 0
     try:
         for table in tables:
@@ -101,7 +113,8 @@ def _csv(body: Body, limits: DecodeLimits, batch_rows: int) -> Iterator[pa.Table
     reader = pacsv.open_csv(
         body.reader(),
         read_options=pacsv.ReadOptions(column_names=names, skip_rows=1, use_threads=True,
-                                       block_size=max(MIN_CSV_BLOCK, batch_rows * CSV_BYTES_PER_ROW)),
+                                       block_size=min(MAX_CSV_BLOCK,
+                                                      max(MIN_CSV_BLOCK, batch_rows * CSV_BYTES_PER_ROW))),
         convert_options=pacsv.ConvertOptions(column_types=dict.fromkeys(names, pa.string()),
                                              strings_can_be_null=False, quoted_strings_can_be_null=False),
     )

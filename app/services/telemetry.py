@@ -12,10 +12,10 @@ import pyarrow as pa
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
-from app.ingest.batches import iter_tables
+from app.ingest.batches import iter_tables, parse_body
 from app.ingest.errors import MAX_REPORTED, RowError, UploadError
 from app.ingest.formats import Decoder, decoders
-from app.ingest.parse import DecodeLimits, LimitExceeded, UnsupportedMediaType, parse_body
+from app.ingest.parse import DecodeLimits, LimitExceeded, UnsupportedMediaType
 from app.ingest.spool import Body
 from app.ingest.validate import ORDER_ERRORS, SensorPolicy, UploadOptions, validate
 from app.services.access import Principal
@@ -80,11 +80,8 @@ def upload_options(config: dict[str, Any], time_scale: str, sensor: str | None, 
                          n_panels=len(config.get("solar_panels", [])) or None)
 
 
-def _decode(body: bytes, content_type: str, spec: StreamSpec, fmt: str | None,
-            opts: UploadOptions, limits: DecodeLimits) -> tuple[pa.Table, UploadOptions]:
-    """The upload as a table of canonical upload columns, by ``format`` or by Content-Type."""
-    if fmt is None or fmt == "table":
-        return parse_body(body, content_type, limits), opts
+def _decode(body: bytes, spec: StreamSpec, fmt: str, opts: UploadOptions) -> tuple[pa.Table, UploadOptions]:
+    """The upload in the file format ``fmt`` as a table of canonical upload columns."""
     decoder = decoders().get(fmt)
     if decoder is None:
         raise UploadError([RowError(None, "format", f"unknown format {fmt!r}; formats: "
@@ -131,7 +128,7 @@ def ingest_upload(session: Session, store: ParquetStore, sc: Spacecraft, spec: S
                 log.info("upload to %s/%s: times go back or repeat; validated whole", sc.name, spec.name)
                 table = parse_body(body.read(), content_type, limits)
         else:
-            table, opts = _decode(body.read(), content_type, spec, fmt, opts, limits)
+            table, opts = _decode(body.read(), spec, fmt, opts)
     except UnsupportedMediaType as exc:
         raise Unsupported(str(exc)) from None
     except LimitExceeded as exc:

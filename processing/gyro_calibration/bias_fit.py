@@ -274,7 +274,9 @@ def _prepare(
     k0 = int(np.searchsorted(tg, ts[0], side="right")) - 1
     k1 = max(int(np.searchsorted(tg, ts[-1], side="left")), k0 + 1)
     t0 = float(tg[k0])
-    w_R = rotations.quat_rotate(q_rg, wg[k0 : k1 + 1])
+    # (N, 3) in Fortran order: omega = w_R + Delta then is too, and the propagation's components-first (3, N)
+    # view of it needs no transposing copy on every evaluation
+    w_R = np.asfortranarray(rotations.quat_rotate(q_rg, wg[k0 : k1 + 1]))
     pb = Problem(
         t_g=tg[k0 : k1 + 1] - t0,
         w_R=w_R,

@@ -110,8 +110,15 @@ def evaluate(pb: Problem, z: FloatArray, delta: FloatArray, q_mu: FloatArray, ja
     psi_z = np.swapaxes(prop.rot_out, -1, -2) @ mrp_pseudo_derivatives(z)  # (M, 3, 3)
     psi = np.concatenate([psi_z, prop.psi_out], axis=2)  # (M, 3, P), R axes at t_n
     psi_s = pb.rot_RS_T @ psi  # sensor axes
-    # da/dx = -1/2 vec(r o psi) = -1/2 (r0 psi + r_vec x psi)
-    jac = -0.5 * (r[:, :1, None] * psi_s + np.cross(r[:, None, 1:], np.swapaxes(psi_s, 1, 2)).swapaxes(1, 2))
+    # da/dx = -1/2 vec(r o psi) = -1/2 (r0 psi + r_vec x psi); the cross product written out per component
+    # (the products and differences np.cross forms, without its transposing copies of (M, P, 3) arrays)
+    r1, r2, r3 = r[:, 1:2], r[:, 2:3], r[:, 3:4]
+    b0, b1, b2 = psi_s[:, 0], psi_s[:, 1], psi_s[:, 2]
+    cross = np.empty_like(psi_s)
+    cross[:, 0] = r2 * b2 - r3 * b1
+    cross[:, 1] = r3 * b0 - r1 * b2
+    cross[:, 2] = r1 * b1 - r2 * b0
+    jac = -0.5 * (r[:, :1, None] * psi_s + cross)
     return Evaluation(a=a, jac=jac, phi=phi, prop=prop, q_model=q_model, psi=psi)
 
 

@@ -78,8 +78,13 @@ def fit_subintervals(
 
     Star-tracker samples with start <= t <= end are used; a sub-interval with fewer than min_samples of
     them gives None. Other keyword arguments go to :func:`fit_gyro_bias` (pass gyro_arw_rad_sqrt_s so that
-    every sub-interval uses the same noise level).
+    every sub-interval uses the same noise level). With gyro_arw_rad_sqrt_s given, each fit is handed only
+    the gyro nodes it integrates over (those :func:`fit_gyro_bias` would pick itself, so the same result),
+    not the whole arc to check and slice again.
     """
+    tg = np.asarray(t_gyro_s, dtype=np.float64)
+    wg = np.asarray(w_G, dtype=np.float64)
+    slice_gyro = kwargs.get("gyro_arw_rad_sqrt_s") is not None and tg.ndim == 1 and wg.shape == (tg.size, 3)
     ts = np.asarray(t_st_s, dtype=np.float64)
     qm = np.asarray(q_IS, dtype=np.float64)
     m = ts.size
@@ -91,9 +96,14 @@ def fit_subintervals(
         if np.count_nonzero(sel) < min_samples:
             out.append(None)
             continue
+        t_g, w_g = t_gyro_s, w_G
+        if slice_gyro and np.any(sel):  # fit_gyro_bias's own choice: from the node at or before the first
+            lo = max(int(np.searchsorted(tg, ts[sel].min(), side="right")) - 1, 0)  # sample to the one at or
+            hi = max(int(np.searchsorted(tg, ts[sel].max(), side="left")), lo + 1) + 1  # after the last
+            t_g, w_g = tg[lo:hi], wg[lo:hi]
         out.append(
             fit_gyro_bias(
-                t_gyro_s, w_G, ts[sel], qm[sel],
+                t_g, w_g, ts[sel], qm[sel],
                 q_RS=None if q_rs is None else q_rs[sel],
                 sensor_index=None if sens is None else sens[sel],
                 **kwargs,  # type: ignore[arg-type]

@@ -121,7 +121,8 @@ def test_pipeline_bridges_rejected_gyro_rates_instead_of_opening_gaps():
 
 
 def test_text_plain_upload_without_format_gets_a_hint():
-    from app.ingest.parse import UnsupportedMediaType, parse_body
+    from app.ingest.batches import parse_body
+    from app.ingest.parse import UnsupportedMediaType
 
     with pytest.raises(UnsupportedMediaType, match=r"format= \(gracefo-l1b, ccsds-oem, ccsds-aem"):
         parse_body(b"header\n1 2 3\n", "text/plain; charset=utf-8")

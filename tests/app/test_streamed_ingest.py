@@ -19,8 +19,8 @@ import pyarrow.parquet as pq
 import pytest
 from fastapi.testclient import TestClient
 
+from app.ingest.batches import parse_body
 from app.ingest.errors import UploadError
-from app.ingest.parse import parse_body
 from app.ingest.validate import UploadOptions, validate
 from app.main import create_app
 from app.services.telemetry import sensor_policy

@@ -7,8 +7,9 @@ frame as a gyro bias (w_meas = w_true + b, rad/s), each with the honest sigma (g
 the paper's sigma_w² C^-1 figure (``*_sigma_paper``). Figures follow 003 figs. 13-16.
 
 Before the fit every tracker's quaternions are checked against the gyro
-(:func:`processing.star_tracker.plausibility.check_star_tracker_gyro`: the quaternion convention and the
-time-tag offset); ``fit_time_offset`` corrects the gyro times by the reference tracker's offset. After it the
+(:func:`processing.star_tracker.plausibility.check_star_tracker_gyro`, through :func:`app.jobs.plausibility.checked`
+which shares the result with star_tracker_accuracy on equal inputs: the quaternion convention and the time-tag
+offset); ``fit_time_offset`` corrects the gyro times by the reference tracker's offset. After it the
 constancy of the offsets across the finest split of ``subintervals`` is tested
 (:func:`processing.gyro_calibration.subintervals.offset_constancy`) and, when it fails, the reported sigma
 carries the offsets' variation within the window (``bias_not_constant``).
@@ -26,6 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field, PositiveFloat
 
+from app.jobs.plausibility import checked
 from app.jobs.registry import JobType
 from app.jobs.types.gyro_bias_fit_figures import figures
 from app.jobs.types.gyro_bias_fit_summary import (
@@ -53,7 +55,7 @@ from processing.gyro_calibration.subintervals import (
     subinterval_edges,
 )
 from processing.signal.sine_series import SineSeriesError, fit_sine_series, select_harmonics
-from processing.star_tracker.plausibility import PlausibilityError, PlausibilityResult, check_star_tracker_gyro
+from processing.star_tracker.plausibility import PlausibilityError, PlausibilityResult
 from processing.tasks import Progress, TaskError, TaskInputs, TaskResult
 from processing.units import NS_PER_S, RAD_PER_ARCSEC
 
@@ -191,8 +193,8 @@ def _plausibility(win: Window, params: Params, notes: list[str]) -> dict[str, Pl
     for name in win.names:
         sel = win.sensor_of == name
         try:
-            out[name] = check_star_tracker_gyro(win.t_st_ns[sel], win.q_IS[sel], win.q_BS[name], win.t_g_ns, win.w_G,
-                                                win.q_BG, sensor=name, max_time_offset_s=params.max_time_offset_s)
+            out[name] = checked(win.t_st_ns[sel], win.q_IS[sel], win.q_BS[name], win.t_g_ns, win.w_G, win.q_BG,
+                                sensor=name, max_time_offset_s=params.max_time_offset_s)
         except PlausibilityError as exc:
             out[name] = str(exc)
             notes.append(f"{name}: star tracker not checked against the gyro: {exc}")
@@ -317,9 +319,11 @@ def _gyro_segments(inputs: TaskInputs, params: Params) -> list[tuple[int, int]]:
         names = inputs.sensors("gyro")
         if len(names) != 1:
             return []
-        t = np.unique(inputs.gyro().time_tai_ns)
+        t = inputs.gyro().time_tai_ns
     except TaskError:
         return []
+    if not np.all(t[1:] > t[:-1]):  # stored in time order: the sort of np.unique only when it is not
+        t = np.unique(t)
     if t.size < 2:
         return []
     cut = np.flatnonzero(np.diff(t) > params.max_gyro_gap_s * NS_PER_S)

@@ -236,6 +236,22 @@ def test_slowly_drifting_offset_is_visible_in_the_subintervals() -> None:
     assert np.all(sig.mean(axis=0) > 1.5 * whole.sigma[3:6])
 
 
+def test_subinterval_fits_are_those_of_the_whole_gyro_record() -> None:
+    """fit_subintervals hands each fit only the gyro nodes it integrates over (issue 24): the same fits, bit
+    for bit, as fit_gyro_bias given the whole record, also for edges on and between the gyro nodes."""
+    sc = simulate(6, duration_s=300.0, st_period_s=1.0)
+    t_g, w, t_s, q = arrays(sc)
+    arw = np.full(3, ARW_ARCSEC_SQRT_S * RAD_PER_ARCSEC)
+    edges = np.array([[0.0, 100.0], [100.05, 177.3], [t_s[40], t_s[250]], [t_s.min(), t_s.max()]])
+    fits = fit_subintervals(t_g, w, t_s, q, edges, q_RG=q_SG(sc), gyro_arw_rad_sqrt_s=arw)
+    for (a, b), got in zip(edges, fits, strict=True):
+        sel = (t_s >= a) & (t_s <= b)
+        want = fit_gyro_bias(t_g, w, t_s[sel], q[sel], q_RG=q_SG(sc), gyro_arw_rad_sqrt_s=arw)
+        assert got is not None and got.t0_s == want.t0_s and got.iterations == want.iterations
+        for name in ("x", "covariance", "covariance_paper", "residuals_rad", "q_IR_model", "star_tracker_sigma_rad"):
+            assert np.array_equal(getattr(got, name), getattr(want, name)), name
+
+
 def test_mounting_is_not_determinable_in_earth_pointing() -> None:
     """003 §2.4: refining Q on these arcs gave clearly wrong values; the fit must say so."""
     sc = simulate(7)
