@@ -168,18 +168,23 @@ def test_times_going_back_across_batches_are_reported_as_for_the_whole_upload(se
     assert sc_files(settings, sc, client) == []
 
 
+def _panels_stored_and_read_back(client, sc, t, panel, current):  # noqa: ANN001, ANN202
+    """Upload panel currents as CSV (every row new) and read the stream back as Parquet."""
+    body = "time,panel,current_a\n" + "".join(f"{a},{p},{c!r}\n" for a, p, c in
+                                             zip(t.tolist(), panel.tolist(), current.tolist(), strict=True))
+    r = upload(client, "panel_currents", body, sc=sc)
+    assert r.status_code == 201 and r.json()["inserted"] == t.size, r.text
+    return pq.read_table(io.BytesIO(client.get(f"/api/v1/spacecraft/{sc}/telemetry/panel_currents",
+                                               params={"format": "parquet"}).content))
+
+
 def test_key_groups_in_blocks_not_in_time_order_stream(service, sc):
     client, _ = service
     n = 600  # panel 1 at every time, then panel 0 at every time: 6 batches, not sorted by time overall
     t = np.tile(T0_S + np.arange(n // 2), 2)
     panel = np.repeat([1, 0], n // 2)
     current = np.round(np.random.default_rng(4).uniform(0, 1, n), 6)
-    body = "time,panel,current_a\n" + "".join(f"{a},{p},{c!r}\n" for a, p, c in
-                                             zip(t.tolist(), panel.tolist(), current.tolist(), strict=True))
-    r = upload(client, "panel_currents", body, sc=sc)
-    assert r.status_code == 201 and r.json()["inserted"] == n, r.text
-    back = pq.read_table(io.BytesIO(client.get(f"/api/v1/spacecraft/{sc}/telemetry/panel_currents",
-                                               params={"format": "parquet"}).content))
+    back = _panels_stored_and_read_back(client, sc, t, panel, current)
     np.testing.assert_array_equal(back.column("panel").to_numpy(), np.sort(panel))
     np.testing.assert_array_equal(back.column("current_a").to_numpy(), np.concatenate([current[n // 2:],
                                                                                       current[:n // 2]]))
@@ -191,12 +196,7 @@ def test_key_groups_interleaved_in_time_stream_across_batches(service, sc):
     t = np.repeat(T0_S + np.arange(n // 2), 2)
     panel = np.tile([1, 0], n // 2)
     current = np.round(np.random.default_rng(2).uniform(0, 1, n), 6)
-    body = "time,panel,current_a\n" + "".join(f"{a},{p},{c!r}\n" for a, p, c in
-                                             zip(t.tolist(), panel.tolist(), current.tolist(), strict=True))
-    r = upload(client, "panel_currents", body, sc=sc)
-    assert r.status_code == 201 and r.json()["inserted"] == n, r.text
-    back = pq.read_table(io.BytesIO(client.get(f"/api/v1/spacecraft/{sc}/telemetry/panel_currents",
-                                               params={"format": "parquet"}).content))
+    back = _panels_stored_and_read_back(client, sc, t, panel, current)
     assert back.num_rows == n
     by_panel = {p: current[panel == p] for p in (0, 1)}  # read back by (sensor, panel, time)
     np.testing.assert_array_equal(back.column("current_a").to_numpy(), np.concatenate([by_panel[0], by_panel[1]]))
