@@ -20,6 +20,14 @@ def free_port() -> int:
         return port
 
 
+_SERVING: dict[str, int] = {}
+
+
+def serving_pid(base: str) -> int:
+    """The process id of the server :func:`running_server` started at ``base`` (benchmarks read its memory)."""
+    return _SERVING[base]
+
+
 @contextmanager
 def running_server(env: dict[str, str], log_path: Path | None = None,
                    timeout_s: float = 60.0) -> Iterator[str]:
@@ -47,8 +55,10 @@ def running_server(env: dict[str, str], log_path: Path | None = None,
             if time.monotonic() > deadline:
                 raise RuntimeError(f"server did not answer /healthz within {timeout_s} s")
             time.sleep(0.1)
+        _SERVING[base] = proc.pid
         yield base
     finally:
+        _SERVING.pop(base, None)
         stop(proc)
         if log_path:
             log.close()  # type: ignore[union-attr]

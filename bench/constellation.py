@@ -26,7 +26,7 @@ from pathlib import Path
 from typing import Any
 
 from app.client import ApiClient
-from app.devserver import running_server
+from app.devserver import running_server, serving_pid
 from processing.simulate.seed003 import simulate_seed003
 from processing.time import timescales
 
@@ -55,24 +55,11 @@ def _tree_rss_bytes(root_pid: int) -> int:
     return total
 
 
-def _server_pid(base: str) -> int:
-    port = base.rsplit(":", 1)[1]
-    for d in Path("/proc").iterdir():
-        if d.name.isdigit():
-            try:
-                cmd = (d / "cmdline").read_bytes().replace(b"\0", b" ").decode()
-            except OSError:
-                continue
-            if " serve " in cmd and cmd.rstrip().find(f"--port {port}") >= 0:
-                return int(d.name)
-    return os.getpid()  # the server is a child of this process: its tree is in ours
-
-
 def run_mode(mode: str, env: dict[str, str], scenarios: list[Any], timeout_s: float,
              dask_pids: list[int]) -> dict[str, Any]:
     with running_server(env) as base:
         client = ApiClient(base, TOKEN)
-        pid = _server_pid(base)
+        pid = serving_pid(base)
         t0 = time.perf_counter()
         for k, sc in enumerate(scenarios):
             client.post("/api/v1/spacecraft", {"name": f"sat{k:03d}", "config": sc.config})

@@ -27,22 +27,10 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from app.devserver import running_server
+from app.devserver import running_server, serving_pid
 
 TOKEN = "bench-read-admin-token"
 UPLOAD_ROWS = 1_000_000
-
-
-def _server_pid(port: int) -> int:
-    for d in Path("/proc").iterdir():
-        if d.name.isdigit():
-            try:
-                cmd = (d / "cmdline").read_bytes().replace(b"\0", b" ").decode()
-            except OSError:
-                continue
-            if " serve " in cmd and f"--port {port}" in cmd:
-                return int(d.name)
-    raise RuntimeError("server process not found")
 
 
 def _status_kib(pid: int, field: str) -> int:
@@ -86,7 +74,7 @@ def main() -> None:
         data = Path(tmp) / "data"
         env = {"ATTITUDE_DATA_DIR": str(data), "ATTITUDE_BOOTSTRAP_TOKEN": TOKEN, "ATTITUDE_DATABASE_URL": ""}
         with running_server(env) as base:
-            pid = _server_pid(int(base.rsplit(":", 1)[1]))
+            pid = serving_pid(base)
             assert _request(base, "POST", "/api/v1/spacecraft", json.dumps({"name": "bench"}).encode())[0] == 201
             t0_ns, done, k = 1_700_000_000 * 10**9, 0, 0
             while done < args.rows:

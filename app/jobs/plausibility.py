@@ -19,12 +19,12 @@ import hashlib
 import threading
 from collections import OrderedDict
 from collections.abc import Sequence
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from processing.star_tracker.multi_head import HeadSeries
 from processing.star_tracker.plausibility import PlausibilityError, PlausibilityResult, check_star_tracker_gyro
 from processing.tasks import ResultWarning
 
@@ -64,16 +64,6 @@ def checked(t_st_ns: ArrayLike, q_IS: ArrayLike, q_BS: ArrayLike, t_gyro_ns: Arr
     return copy.deepcopy(hit)
 
 
-@dataclass(frozen=True)
-class HeadSamples:
-    """One star tracker's samples: name, times (N,) int64 TAI ns, q_IS (N, 4) as stored, mounting q_BS (4,)."""
-
-    name: str
-    time_tai_ns: NDArray[np.int64]
-    q_IS: NDArray[np.float64]
-    q_BS: NDArray[np.float64]
-
-
 def midpoint_rates(t_nodes_ns: NDArray[np.int64], da_G: NDArray[np.float64]) -> tuple[NDArray[np.int64],
                                                                                        NDArray[np.float64]]:
     """Mean rates over consecutive gyro steps at their midpoints: t (M,) int64, w_G (M, 3) rad/s, from node
@@ -83,7 +73,7 @@ def midpoint_rates(t_nodes_ns: NDArray[np.int64], da_G: NDArray[np.float64]) -> 
     return t[:-1] + np.diff(t) // 2, np.asarray(da_G, dtype=np.float64) / dt_s[:, None]
 
 
-def check_heads(heads: Sequence[HeadSamples], t_gyro_ns: NDArray[np.int64], w_G: NDArray[np.float64],
+def check_heads(heads: Sequence[HeadSeries], t_gyro_ns: NDArray[np.int64], w_G: NDArray[np.float64],
                 q_BG: NDArray[np.float64], notes: list[str],
                 max_time_offset_s: float = 1.0) -> tuple[dict[str, Any], list[ResultWarning]]:
     """({head: its plausibility summary, or {"checked": False, "reason": ...}}, the warnings of every head).

@@ -34,7 +34,7 @@ import numpy as np
 from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field, PositiveFloat, model_validator
 
-from app.jobs.plausibility import HeadSamples, check_heads
+from app.jobs.plausibility import check_heads
 from app.jobs.registry import JobType
 from app.jobs.types.alignment_calibration_figures import figures
 from app.jobs.types.alignment_calibration_summary import (
@@ -48,6 +48,7 @@ from app.reports.headline import Answer
 from processing.attitude import rotations
 from processing.gyro_calibration.calibration import CalibrationSettings, calibrate_gyro
 from processing.signal.two_pass_filter import increments_from_rates
+from processing.star_tracker.multi_head import HeadSeries
 from processing.tasks import Progress, TaskError, TaskInputs, TaskResult
 from processing.units import NS_PER_S, RAD_PER_ARCSEC, RAD_PER_DEG
 
@@ -193,7 +194,7 @@ def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
     # mean rates over the increments at their midpoints (what the plausibility check takes)
     t_mid = g_ns - np.round(0.5 * np.asarray(interval) * NS_PER_S).astype(np.int64)
     w_mid = incr / np.asarray(interval, dtype=np.float64)[:, None]
-    summary["plausibility"], plausible = check_heads([HeadSamples(sensor, st_ns, q_IS, q_BS)], t_mid, w_mid, q_BG,
+    summary["plausibility"], plausible = check_heads([HeadSeries(sensor, st_ns, q_IS, q_BS)], t_mid, w_mid, q_BG,
                                                      notes)
     head = summary["plausibility"].get(sensor, {})
     summary["time_offset_s"] = head.get("time_offset_s")

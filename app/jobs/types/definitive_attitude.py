@@ -20,7 +20,7 @@ import numpy as np
 from matplotlib.figure import Figure
 from pydantic import BaseModel, ConfigDict, Field
 
-from app.jobs.plausibility import HeadSamples, check_heads, midpoint_rates
+from app.jobs.plausibility import check_heads, midpoint_rates
 from app.jobs.registry import JobType
 from app.reports.headline import Answer
 from app.reports.sections import ReportContext, ReportSection, ReportTable
@@ -37,6 +37,7 @@ from processing.definitive.model import (
 )
 from processing.estimation.chi2 import chi2_ppf
 from processing.formats.ccsds_adm import aem_segment, write_aem
+from processing.star_tracker.multi_head import HeadSeries
 from processing.tasks import Progress, ResultWarning, TaskError, TaskInputs, TaskResult
 from processing.units import ARCSEC_PER_RAD, NS_PER_S, RAD_PER_ARCSEC
 
@@ -275,7 +276,7 @@ def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
     notes = list(r.notes)
     t_mid, w_mid = midpoint_rates(steps.t_ns, steps.da_G)
     summary["plausibility"], plausible = check_heads(
-        [HeadSamples(h.name, h.time_tai_ns, h.q_IS, h.q_BS) for h in heads], t_mid, w_mid, q_BG, notes)
+        [HeadSeries(h.name, h.time_tai_ns, h.q_IS, h.q_BS) for h in heads], t_mid, w_mid, q_BG, notes)
     comparison: dict[str, Any] = {}
     for name in params.compare_with:
         progress(0.85, f"comparison with {name}")

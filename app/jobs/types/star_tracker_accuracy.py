@@ -18,7 +18,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from app.jobs import multi_head
 from app.jobs.partitions import map_partitions
-from app.jobs.plausibility import HeadSamples, check_heads
+from app.jobs.plausibility import check_heads
 from app.jobs.registry import JobType
 from app.jobs.types.star_tracker_accuracy_figures import figures
 from app.reports.headline import Answer
@@ -28,7 +28,7 @@ from processing.star_tracker.accuracy import (
     analyze_star_tracker_accuracy,
 )
 from processing.star_tracker.gyro_coverage import GYRO_MIN_RATE_RATIO, GYRO_SAMPLES_PER_PARAMETER
-from processing.star_tracker.multi_head import MultiHeadSettings
+from processing.star_tracker.multi_head import HeadSeries, MultiHeadSettings
 from processing.tasks import Progress, ResultWarning, TaskError, TaskInputs, TaskResult
 from processing.units import ARCSEC_PER_RAD
 
@@ -251,7 +251,7 @@ def _plausibility(sensor: str, t: np.ndarray, q: np.ndarray, q_BS: np.ndarray,
                   gyro: tuple[np.ndarray, np.ndarray, np.ndarray], notes: list[str]) -> tuple[dict[str, Any],
                                                                                             list[ResultWarning]]:
     """The star tracker checked against the gyro (app.jobs.plausibility.check_heads)."""
-    return check_heads([HeadSamples(sensor, t, q, np.asarray(q_BS, dtype=np.float64))], gyro[0], gyro[1],
+    return check_heads([HeadSeries(sensor, t, q, np.asarray(q_BS, dtype=np.float64))], gyro[0], gyro[1],
                        np.asarray(gyro[2], dtype=np.float64), notes)
 
 
