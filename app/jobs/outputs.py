@@ -14,7 +14,7 @@ from __future__ import annotations
 import io
 import json
 import math
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -190,21 +190,24 @@ def _output_notes(outputs: dict[str, Any]) -> list[str]:
     return notes
 
 
-def csv_chunks(path: Path) -> Iterator[bytes]:
-    """A stored Parquet table as CSV (text cells made spreadsheet-safe), in chunks of CSV_BATCH_ROWS rows:
-    the header once, then the rows; memory bounded by one batch."""
-    pf = pq.ParquetFile(path)
+def csv_text(tables: Iterable[pa.Table], empty: pa.Schema | None = None) -> Iterator[bytes]:
+    """Consecutive tables as one CSV (text cells made spreadsheet-safe), a piece per table: the header once,
+    then the rows. No table at all: the header of ``empty`` alone (nothing when None)."""
     first = True
-    for batch in pf.iter_batches(batch_size=CSV_BATCH_ROWS):
+    for table in tables:
         buf = io.BytesIO()
-        pacsv.write_csv(csv_safe(pa.Table.from_batches([batch])), buf,
-                        write_options=pacsv.WriteOptions(include_header=first))
+        pacsv.write_csv(csv_safe(table), buf, write_options=pacsv.WriteOptions(include_header=first))
         first = False
         yield buf.getvalue()
-    if first:  # no rows: the header alone
-        buf = io.BytesIO()
-        pacsv.write_csv(csv_safe(pf.schema_arrow.empty_table()), buf)
-        yield buf.getvalue()
+    if first and empty is not None:
+        yield from csv_text([empty.empty_table()])
+
+
+def csv_chunks(path: Path) -> Iterator[bytes]:
+    """A stored Parquet table as CSV in chunks of CSV_BATCH_ROWS rows: memory bounded by one batch."""
+    pf = pq.ParquetFile(path)
+    return csv_text((pa.Table.from_batches([b]) for b in pf.iter_batches(batch_size=CSV_BATCH_ROWS)),
+                    pf.schema_arrow)
 
 
 def thin_lines(fig: Figure, max_points: int = FIGURE_LINE_MAX_POINTS,

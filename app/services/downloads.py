@@ -13,7 +13,7 @@ import pyarrow as pa
 import pyarrow.csv as pacsv
 import pyarrow.parquet as pq
 
-from app.jobs.outputs import csv_safe, jsonable
+from app.jobs.outputs import csv_safe, csv_text, jsonable
 from processing.streams import TIME_COLUMN
 from processing.time import timescales
 
@@ -138,17 +138,16 @@ def _pieces(chunks: Iterator[pa.Table], fmt: str) -> Iterator[pa.Table]:
 def stream_chunks(chunks: Iterator[pa.Table], fmt: str, time_scale: str, time_format: str) -> Iterator[bytes]:
     """The encoded download of consecutive tables: one CSV header, one JSON array, one Arrow IPC stream, one Parquet
     file (a row group per table)."""
+    if fmt == "csv":
+        yield from csv_text(with_times(table, time_scale, time_format) for table in _pieces(chunks, fmt))
+        return
     first = True
     writer: Any = None
     sink = _Spool()
     for table in _pieces(chunks, fmt):
         timed = with_timestamps(table, time_scale) if fmt in BINARY_FORMATS else with_times(table, time_scale,
                                                                                              time_format)
-        if fmt == "csv":
-            buf = io.BytesIO()
-            pacsv.write_csv(csv_safe(timed), buf, write_options=pacsv.WriteOptions(include_header=first))
-            yield buf.getvalue()
-        elif fmt == "json":
+        if fmt == "json":
             body = json.dumps(jsonable(timed.to_pylist()), ensure_ascii=False, allow_nan=False,
                               separators=(",", ":"))[1:-1]
             if body:
@@ -164,8 +163,6 @@ def stream_chunks(chunks: Iterator[pa.Table], fmt: str, time_scale: str, time_fo
         first = False
     if fmt == "json":
         yield b"[]" if first else b"]"
-    elif fmt == "csv" and first:
-        yield b""
     elif writer is not None:  # arrow: the end-of-stream marker; parquet: the footer
         writer.close()
         yield sink.take()
