@@ -25,9 +25,9 @@ from sqlalchemy.orm import Session
 from processing.streams import TIME_COLUMN, StreamSpec
 from processing.units import NS_PER_DAY
 from storage.locks import stream_lock
-from storage.models import Ingest, TelemetryFile, new_id
+from storage.models import Ingest, new_id
 from storage.parquet_store import ParquetStore, StagedFiles
-from storage.telemetry import ConflictError, IngestMeta, _files_in_window, _read_files, _split_new, arrow_schema
+from storage.telemetry import ConflictError, IngestMeta, arrow_schema, ingest_record, new_rows, register_files
 
 MAX_CONFLICTS_REPORTED = 100
 
@@ -111,15 +111,11 @@ class StreamedIngest:
         self.sensors.update(table.column("sensor").unique().to_pylist())
         if len(self.days) > self.max_days:
             return
-        new_mask = np.ones(table.num_rows, dtype=bool)
-        files = _files_in_window(self.session, self.spacecraft_id, self.spec.name, lo, hi)
-        stored = _read_files(self.session, self.store, files, lo, hi) if files else []
-        if stored:
-            existing = pa.concat_tables(stored, promote_options="permissive")
-            new_mask, conflicts, n_conflicts = _split_new(existing, table, self.spec, row_index)
-            if n_conflicts:
-                self.conflicts += conflicts[:MAX_CONFLICTS_REPORTED - len(self.conflicts)]
-                self.n_conflicts += n_conflicts
+        new_mask, conflicts, n_conflicts = new_rows(self.session, self.store, self.spacecraft_id, self.spec, table,
+                                                    row_index, lo, hi)
+        if n_conflicts:
+            self.conflicts += conflicts[:MAX_CONFLICTS_REPORTED - len(self.conflicts)]
+            self.n_conflicts += n_conflicts
         n_new = int(new_mask.sum())
         self.inserted += n_new
         if n_new and not self.n_conflicts:  # after a conflict nothing more is written (it will be refused)
@@ -135,22 +131,11 @@ class StreamedIngest:
             raise ConflictError(self.conflicts, self.n_conflicts)
         if self.t0 is None or self.t1 is None:
             raise ValueError("no rows were added")
-        record = Ingest(
-            id=new_id(), spacecraft_id=self.spacecraft_id, stream=self.spec.name, sensor=",".join(sorted(self.sensors)),
-            rows=self.rows, inserted=self.inserted, duplicates=self.rows - self.inserted, start_tai_ns=self.t0,
-            end_tai_ns=self.t1, filename=meta.filename, content_type=meta.content_type, size_bytes=meta.size_bytes,
-            checksum_sha256=meta.checksum_sha256, time_scale=meta.time_scale,
-            status="stored" if self.inserted else "duplicate", api_key_id=meta.api_key_id,
-        )
+        record = ingest_record(self.spacecraft_id, self.spec, meta, sensors=self.sensors, rows=self.rows,
+                               inserted=self.inserted, t0=self.t0, t1=self.t1, ingest_id=new_id())
         self.session.add(record)
         self.session.flush()
-        written = self._staged.publish(record.id)  # removed again by __exit__ if the commit fails
-        self.session.info.setdefault("written_files", []).extend(w.path for w in written)
-        for w in written:
-            self.session.add(TelemetryFile(
-                ingest_id=record.id, spacecraft_id=self.spacecraft_id, stream=self.spec.name, day=w.day,
-                path=w.path, rows=w.rows, t_min_tai_ns=w.t_min_tai_ns, t_max_tai_ns=w.t_max_tai_ns,
-                sensors=",".join(w.sensors)))
+        register_files(self.session, record, self._staged.publish(record.id))  # removed by __exit__ on failure
         self.session.commit()
         self.session.info.pop("written_files", None)
         return record

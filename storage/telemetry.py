@@ -23,7 +23,7 @@ from processing.streams import TIME_COLUMN, StreamSpec
 from storage.errors import DamagedFileError
 from storage.locks import stream_lock
 from storage.models import Ingest, IngestRetraction, Job, JobRetraction, TelemetryFile
-from storage.parquet_store import ParquetStore
+from storage.parquet_store import ParquetStore, WrittenFile
 
 log = logging.getLogger("attitude.storage")
 
@@ -355,38 +355,57 @@ def ingest(session: Session, store: ParquetStore, spacecraft_id: int, spec: Stre
     """
     times = table.column(TIME_COLUMN).to_numpy()
     t0, t1 = int(times.min()), int(times.max())
-    files = _files_in_window(session, spacecraft_id, spec.name, t0, t1)
-    new_mask = np.ones(table.num_rows, dtype=bool)
-    if files:
-        stored = _read_files(session, store, files, t0, t1)
-        if stored:
-            existing = pa.concat_tables(stored, promote_options="permissive")
-            new_mask, conflicts, n_conflicts = _split_new(existing, table, spec, row_index)
-            if n_conflicts:
-                raise ConflictError(conflicts, n_conflicts)
+    new_mask, conflicts, n_conflicts = new_rows(session, store, spacecraft_id, spec, table, row_index, t0, t1)
+    if n_conflicts:
+        raise ConflictError(conflicts, n_conflicts)
     n_new = int(new_mask.sum())
-    sensors = sorted(set(table.column("sensor").unique().to_pylist()))
-    record = Ingest(
-        spacecraft_id=spacecraft_id, stream=spec.name, sensor=",".join(sensors), rows=table.num_rows,
-        inserted=n_new, duplicates=table.num_rows - n_new, start_tai_ns=t0, end_tai_ns=t1,
-        filename=meta.filename, content_type=meta.content_type, size_bytes=meta.size_bytes,
-        checksum_sha256=meta.checksum_sha256, time_scale=meta.time_scale,
-        status="stored" if n_new else "duplicate", api_key_id=meta.api_key_id,
-    )
+    sensors = set(table.column("sensor").unique().to_pylist())
+    record = ingest_record(spacecraft_id, spec, meta, sensors=sensors, rows=table.num_rows, inserted=n_new,
+                           t0=t0, t1=t1)
     session.add(record)
     session.flush()
     if n_new:
-        new_rows = table if n_new == table.num_rows else table.filter(pa.array(new_mask))
-        written = store.write(spacecraft_id, spec.name, record.id, new_rows)
-        session.info.setdefault("written_files", []).extend(w.path for w in written)
-        for w in written:
-            session.add(TelemetryFile(
-                ingest_id=record.id, spacecraft_id=spacecraft_id, stream=spec.name, day=w.day,
-                path=w.path, rows=w.rows, t_min_tai_ns=w.t_min_tai_ns, t_max_tai_ns=w.t_max_tai_ns,
-                sensors=",".join(w.sensors),
-            ))
+        rows = table if n_new == table.num_rows else table.filter(pa.array(new_mask))
+        register_files(session, record, store.write(spacecraft_id, spec.name, record.id, rows))
     session.flush()
     return record
+
+
+def new_rows(session: Session, store: ParquetStore, spacecraft_id: int, spec: StreamSpec, table: pa.Table,
+             row_index: np.ndarray, t0: int, t1: int) -> tuple[np.ndarray, list[dict[str, object]], int]:
+    """Mask of the rows of ``table`` (times in [t0, t1]) not yet stored, and the rows that conflict with stored
+    samples (reported with their upload row from ``row_index``) with their count; only the stored files
+    overlapping [t0, t1] are read."""
+    files = _files_in_window(session, spacecraft_id, spec.name, t0, t1)
+    stored = _read_files(session, store, files, t0, t1) if files else []
+    if not stored:
+        return np.ones(table.num_rows, dtype=bool), [], 0
+    return _split_new(pa.concat_tables(stored, promote_options="permissive"), table, spec, row_index)
+
+
+def ingest_record(spacecraft_id: int, spec: StreamSpec, meta: IngestMeta, *, sensors: Iterable[str], rows: int,
+                  inserted: int, t0: int, t1: int, ingest_id: str | None = None) -> Ingest:
+    """The catalog row of an upload of ``rows`` rows, ``inserted`` of them new, spanning [t0, t1]."""
+    return Ingest(
+        **({"id": ingest_id} if ingest_id is not None else {}),
+        spacecraft_id=spacecraft_id, stream=spec.name, sensor=",".join(sorted(sensors)), rows=rows,
+        inserted=inserted, duplicates=rows - inserted, start_tai_ns=t0, end_tai_ns=t1,
+        filename=meta.filename, content_type=meta.content_type, size_bytes=meta.size_bytes,
+        checksum_sha256=meta.checksum_sha256, time_scale=meta.time_scale,
+        status="stored" if inserted else "duplicate", api_key_id=meta.api_key_id,
+    )
+
+
+def register_files(session: Session, record: Ingest, written: Iterable[WrittenFile]) -> None:
+    """Catalog the files written for ``record`` (and note them, so that a failed commit removes them)."""
+    written = list(written)
+    session.info.setdefault("written_files", []).extend(w.path for w in written)
+    for w in written:
+        session.add(TelemetryFile(
+            ingest_id=record.id, spacecraft_id=record.spacecraft_id, stream=record.stream, day=w.day,
+            path=w.path, rows=w.rows, t_min_tai_ns=w.t_min_tai_ns, t_max_tai_ns=w.t_max_tai_ns,
+            sensors=",".join(w.sensors),
+        ))
 
 
 def commit_ingest(session: Session, store: ParquetStore, spacecraft_id: int, spec: StreamSpec,
