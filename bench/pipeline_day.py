@@ -107,6 +107,7 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=100)
     ap.add_argument("--top", type=int, default=10)
     ap.add_argument("--no-profile", action="store_true", help="time without cProfile's overhead (no top list)")
+    ap.add_argument("--profile-out", type=Path, help="also dump the job's cProfile stats to this file (pstats)")
     a = ap.parse_args()
     start = int(timescales.iso_to_tai_ns(["2023-06-01T00:00:00Z"])[0])
     t0 = time.perf_counter()
@@ -162,6 +163,8 @@ def main() -> None:
     print(f"peak RSS of this process: {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**10:.0f} MiB")
     if a.no_profile:
         return
+    if a.profile_out is not None:
+        profile.dump_stats(a.profile_out)
     out = io.StringIO()
     pstats.Stats(profile, stream=out).sort_stats("cumulative").print_stats(a.top)
     print("\ncProfile (CPU seconds of this process), top by cumulative time:")
