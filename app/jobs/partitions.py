@@ -13,13 +13,17 @@ type's ``run`` cuts its inputs with :func:`time_partitions` / :func:`split_colum
 
 ``func`` must be a module-level function (Dask pickles it by reference), pure and deterministic, so
 both paths give the same results; the results come back in the order of ``parts``.
+
+:func:`map_concurrent` runs a few long, unequal pieces of one job side by side (the independent branches of
+the ``reconstruction`` pipeline): each piece its own thread here, or its own task on a Dask cluster, with the
+job's own thread watching for cancellation while they run.
 """
 
 from __future__ import annotations
 
 import os
 from collections.abc import Callable, Mapping, Sequence
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 from typing import Any, TypeVar
 
 import numpy as np
@@ -124,3 +128,64 @@ def map_partitions(func: Callable[[T], R], parts: Sequence[T], *, progress: Prog
             out.append(f.result())
             progress((i + 1) / n, f"{stage} {i + 1}/{n}")
         return out
+
+
+POLL_S = 0.5
+"""How often :func:`map_concurrent` calls its ``poll`` while the pieces run (seconds)."""
+
+
+def map_concurrent(func: Callable[[T, Progress], R], parts: Sequence[T], progresses: Sequence[Progress], *,
+                   poll: Callable[[list[int]], None] = lambda finished: None) -> list[R]:
+    """``[func(p, progress) for p, progress in zip(parts, progresses)]``, every part at the same time.
+
+    Here: a thread per part, each given its own progress callback. On a Dask worker: a task per part on the
+    same cluster (the parts scattered to the workers), each given :func:`no_progress`, since a callback that
+    writes to the job's database does not travel; the job's progress then moves as the parts finish. Either
+    way the calling thread calls ``poll(indices of the parts finished)`` every :data:`POLL_S` s while it waits, so a
+    ``poll`` that raises (a cancelled job) stops the wait: the remaining Dask tasks are cancelled, and
+    threads, which cannot be stopped, are waited for (their own progress callbacks raise the same way).
+    The first exception of a part, in the order of ``parts``, is raised once all have ended; otherwise the
+    results come back in the order of ``parts``. ``func`` is a module-level function, as for
+    :func:`map_partitions`."""
+    if len(progresses) != len(parts):
+        raise ValueError(f"{len(parts)} parts but {len(progresses)} progress callbacks")
+    if not parts:
+        return []
+    if len(parts) == 1:
+        return [func(parts[0], progresses[0])]
+    if _dask_client_available():
+        from distributed import wait as dask_wait
+        from distributed import worker_client
+
+        with worker_client(separate_thread=True) as client:
+            # each part on a worker of its own while there are workers to spare (the scheduler would otherwise
+            # queue them where their data are; allow_other_workers keeps a lost worker from stranding one)
+            workers = sorted(client.nthreads())
+            futures = []
+            for i, part in enumerate(parts):
+                where = [workers[i % len(workers)]] if workers else None
+                data = client.scatter([part], workers=where, hash=False)[0]  # a list: a dict part is no mapping
+                futures.append(client.submit(func, data, no_progress, pure=False, workers=where,
+                                             allow_other_workers=True))
+            try:
+                while True:
+                    finished = [i for i, f in enumerate(futures) if f.done()]
+                    poll(finished)
+                    if len(finished) == len(futures):
+                        break
+                    try:
+                        dask_wait(futures, timeout=POLL_S, return_when="FIRST_COMPLETED")
+                    except TimeoutError:
+                        pass
+            except BaseException:
+                client.cancel(futures)
+                raise
+            return list(client.gather(futures))
+    with ThreadPoolExecutor(max_workers=len(parts), thread_name_prefix="concurrent") as pool:
+        local = [pool.submit(func, p, prog) for p, prog in zip(parts, progresses, strict=True)]
+        pending = set(local)
+        while pending:
+            poll([i for i, f in enumerate(local) if f not in pending])
+            _, pending = wait(pending, timeout=POLL_S, return_when=FIRST_COMPLETED)
+        poll(list(range(len(local))))
+    return [f.result() for f in local]

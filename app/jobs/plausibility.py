@@ -9,7 +9,8 @@ same findings whichever job reads them.
 Both go through :func:`checked`, which keeps the last few results keyed by a digest of every input (the
 arrays' bytes, dtypes and shapes, and the parameters): a pipeline whose stages check the same tracker against
 the same gyro (star_tracker_accuracy, then gyro_bias_fit, in ``reconstruction``) runs the check once (0.7-0.8 s
-CPU on a 24 h day of 10 Hz gyro data, against ~0.03 s for the digest). Each caller gets its own copy.
+CPU on a 24 h day of 10 Hz gyro data, against ~0.03 s for the digest), also when the two run side by side:
+a caller of a check that another thread is computing waits for its result. Each caller gets its own copy.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ import hashlib
 import threading
 from collections import OrderedDict
 from collections.abc import Sequence
+from concurrent.futures import Future
 from typing import Any
 
 import numpy as np
@@ -33,6 +35,9 @@ CHECK_CACHE_SIZE = 4
 
 _cache: OrderedDict[str, PlausibilityResult] = OrderedDict()
 _cache_lock = threading.Lock()
+_running: dict[str, Future[PlausibilityResult]] = {}
+"""Checks being computed, by key: a concurrent caller of the same check waits for it instead of computing it
+again (the branches of ``reconstruction`` run side by side)."""
 
 
 def _digest(arrays: Sequence[ArrayLike], params: Sequence[object]) -> str:
@@ -54,13 +59,28 @@ def checked(t_st_ns: ArrayLike, q_IS: ArrayLike, q_BS: ArrayLike, t_gyro_ns: Arr
         hit = _cache.get(key)
         if hit is not None:
             _cache.move_to_end(key)
-    if hit is None:
+            return copy.deepcopy(hit)
+        running = _running.get(key)
+        owner = running is None
+        if owner:
+            running = _running[key] = Future()
+    assert running is not None
+    if not owner:  # the same check is being computed by a concurrent stage: its result (or its error)
+        return copy.deepcopy(running.result())
+    try:
         hit = check_star_tracker_gyro(t_st_ns, q_IS, q_BS, t_gyro_ns, w_G, q_BG, sensor=sensor,
                                       max_time_offset_s=max_time_offset_s)
+    except BaseException as exc:
         with _cache_lock:
-            _cache[key] = hit
-            while len(_cache) > CHECK_CACHE_SIZE:
-                _cache.popitem(last=False)
+            del _running[key]
+        running.set_exception(exc)
+        raise
+    with _cache_lock:
+        _cache[key] = hit
+        while len(_cache) > CHECK_CACHE_SIZE:
+            _cache.popitem(last=False)
+        del _running[key]
+    running.set_result(hit)
     return copy.deepcopy(hit)
 
 

@@ -3,6 +3,7 @@ worker loss retried or failed with a clear reason, cancel and timeout, partition
 
 from __future__ import annotations
 
+import importlib
 import math
 import os
 import signal
@@ -13,7 +14,7 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
-from app.jobs.partitions import map_partitions, split_columns, time_partitions
+from app.jobs.partitions import map_concurrent, map_partitions, split_columns, time_partitions
 from app.jobs.registry import registry
 from app.main import create_app
 from processing.simulate.seed003 import simulate_seed003
@@ -203,6 +204,35 @@ def test_partitions_fan_out_on_the_cluster_and_match_in_process(cluster):
                                                                       for i in range(10)]
     assert {pid for _, pid in on_dask} <= set(dclient.run(os.getpid).values())
     assert {pid for _, pid in in_process} == {os.getpid()}
+
+
+def _branch(part, progress):
+    """A module-level branch: sleeps, so that two branches overlap when they run side by side."""
+    start = time.time()
+    time.sleep(part["sleep_s"])
+    return part["name"], os.getpid(), (start, time.time())
+
+
+def _two_branches(sleep_s: float):
+    polls: list[list[int]] = []
+    out = map_concurrent(_branch, [{"name": "a", "sleep_s": sleep_s}, {"name": "b", "sleep_s": sleep_s}],
+                         [lambda f, s: None] * 2, poll=polls.append)
+    return out, polls
+
+
+def test_concurrent_branches_run_on_two_workers(cluster):
+    """map_concurrent inside a job on the cluster: one task per branch, the two on different workers at the same
+    time (the job's task waits without holding its worker's thread), results in the order of the parts."""
+    _, dclient = cluster
+    dclient.wait_for_workers(2, timeout=180)
+    dclient.run(importlib.import_module, __name__)  # every worker has imported this module (as after a first job)
+    out, polls = dclient.submit(_two_branches, 1.0, pure=False).result(timeout=120)
+    assert [name for name, _, _ in out] == ["a", "b"]
+    pids = {pid for _, pid, _ in out}
+    assert len(pids) == 2 and pids <= set(dclient.run(os.getpid).values())
+    (a0, a1), (b0, b1) = (span for _, _, span in out)
+    assert a0 < b1 and b0 < a1, "the branches did not run at the same time"
+    assert polls[-1] == [0, 1] and len(polls) >= 2
 
 
 def test_time_partitions_cover_the_window_once():

@@ -4,6 +4,7 @@ gyro_bias_fit); small stand-ins for the stages still being written (screening, o
 
 from __future__ import annotations
 
+import dataclasses
 import importlib
 
 import numpy as np
@@ -94,7 +95,7 @@ def stages(monkeypatch):
 def test_pipeline_runs_the_registered_stages_and_passes_data_along(stages, inputs):
     calls = []
     params = reconstruction.Params(stage_params={"gyro_bias_fit": {"subintervals": []}}
-                                   if "gyro_bias_fit" in stages else {})
+                                   if "gyro_bias_fit" in stages else {}, parallel_stages=False)
     result = reconstruction.run(inputs, params, lambda f, s: calls.append((f, s)))
     expected = [s for s in reconstruction.STAGE_NAMES if s in stages and s != "alignment_calibration"]
     assert result.summary["stages_run"] == expected
@@ -238,3 +239,110 @@ def test_in_sorted_is_isin():
         x = rng.integers(0, 500, size=rng.integers(0, 200))
         values = np.sort(rng.integers(0, 500, size=rng.integers(0, 200)))
         np.testing.assert_array_equal(reconstruction._in_sorted(x, values), np.isin(x, values))
+
+
+def _tables_equal(a, b):
+    assert set(a) == set(b)
+    for name in a:
+        assert set(a[name]) == set(b[name]), name
+        for col in a[name]:
+            np.testing.assert_array_equal(np.asarray(a[name][col]), np.asarray(b[name][col]), err_msg=f"{name}.{col}")
+
+
+def test_branches_side_by_side_give_the_serial_result(stages, inputs, monkeypatch):
+    """star_tracker_accuracy and gyro_bias_fit -> orbital_attitude run at the same time, in threads of their own;
+    the result (summary, tables, notes, warnings) is the one of the stages in order, the progress never goes
+    back and names every stage."""
+    import threading
+
+    from app.jobs import plausibility
+
+    threads: dict[str, set[int]] = {}
+    timed = {}
+    for name, jt in stages.items():
+        if name == "reconstruction":
+            continue
+
+        def run(i, p, progress, _run=jt.run, _name=name):
+            threads.setdefault(_name, set()).add(threading.get_ident())
+            return _run(i, p, progress)
+        timed[name] = dataclasses.replace(jt, run=run)
+    timed["reconstruction"] = stages["reconstruction"]
+    monkeypatch.setattr(registry_module, "registry", lambda: timed)
+    stage_params = {"gyro_bias_fit": {"subintervals": []}} if "gyro_bias_fit" in stages else {}
+    runs = {}
+    for parallel in (False, True):
+        plausibility._cache.clear()
+        calls: list[tuple[float, str]] = []
+        runs[parallel] = reconstruction.run(
+            inputs, reconstruction.Params(stage_params=stage_params, parallel_stages=parallel),
+            lambda f, s, _calls=calls: _calls.append((f, s)))
+        fractions = [f for f, _ in calls]
+        assert fractions == sorted(fractions) and fractions[-1] == pytest.approx(0.88)
+        assert {s.split(":")[0] for _, s in calls} == set(runs[parallel].summary["stages_run"])
+    serial, parallel = runs[False], runs[True]
+    assert repr(serial.summary) == repr(parallel.summary)
+    assert serial.notes == parallel.notes
+    assert [w.as_dict() for w in serial.warnings] == [w.as_dict() for w in parallel.warnings]
+    _tables_equal(serial.tables, parallel.tables)
+    if {"star_tracker_accuracy", "gyro_bias_fit"} <= set(stages):
+        assert serial.summary["stages_run"] == ["data_screening", "star_tracker_accuracy", "gyro_bias_fit",
+                                                "orbital_attitude"]
+        # serial: every stage on this thread; side by side: the two branches each on a thread of their own
+        assert {len(t) for t in threads.values()} <= {1, 2}
+        assert threads["star_tracker_accuracy"] - threads["data_screening"]
+        assert not (threads["star_tracker_accuracy"] - threads["data_screening"]) & threads["gyro_bias_fit"]
+
+
+def test_failures_in_both_branches_report_the_first_stage_in_pipeline_order(stages, inputs, monkeypatch):
+    def fails(message):
+        def run(inputs, params, progress):
+            if message == "slow":
+                import time
+                time.sleep(0.3)  # fails after the other branch did: the order of failing does not choose
+            raise TaskError(message)
+        return run
+
+    broken = dict(stages, star_tracker_accuracy=JobType(name="star_tracker_accuracy", title="", paper="",
+                                                        params=NoParams, run=fails("slow"), any_stream=True),
+                  gyro_bias_fit=JobType(name="gyro_bias_fit", title="", paper="", params=NoParams,
+                                        run=fails("no gyro fit"), any_stream=True))
+    monkeypatch.setattr(registry_module, "registry", lambda: broken)
+    for parallel in (True, False):
+        with pytest.raises(TaskError, match="pipeline stage star_tracker_accuracy failed: slow"):
+            reconstruction.run(inputs, reconstruction.Params(parallel_stages=parallel), lambda f, s: None)
+        result = reconstruction.run(inputs, reconstruction.Params(parallel_stages=parallel, continue_on_error=True),
+                                    lambda f, s: None)
+        assert result.summary["stages"]["star_tracker_accuracy"] == {"status": "failed", "error": "slow"}
+        assert result.summary["stages"]["gyro_bias_fit"] == {"status": "failed", "error": "no gyro fit"}
+        assert result.summary["stages_run"] == ["data_screening", "orbital_attitude"]
+        assert [n for n in result.notes if "failed" in n] == ["star_tracker_accuracy failed: slow",
+                                                             "gyro_bias_fit failed: no gyro fit"]
+
+
+def test_a_cancel_while_the_branches_run_stops_the_pipeline(stages, inputs, monkeypatch):
+    """The job's own thread checks for a cancel while it waits for the branches: the cancel propagates."""
+    import threading
+
+    from app.jobs.runner import JobCancelled
+
+    release = threading.Event()
+
+    def slow(inputs, params, progress):
+        assert release.wait(30)
+        return TaskResult(summary={})
+
+    slowed = dict(stages, star_tracker_accuracy=JobType(name="star_tracker_accuracy", title="", paper="",
+                                                        params=NoParams, run=slow, any_stream=True))
+    monkeypatch.setattr(registry_module, "registry", lambda: slowed)
+    polls = []
+
+    def progress(fraction, stage):
+        polls.append(stage)
+        if sum(not p.startswith("data_screening") for p in polls) > 3:  # the branches started, one is waiting
+            release.set()
+            raise JobCancelled()
+
+    with pytest.raises(JobCancelled):
+        reconstruction.run(inputs, reconstruction.Params(stages=["data_screening", "star_tracker_accuracy",
+                                                                 "orbital_attitude"]), progress)

@@ -87,3 +87,47 @@ def test_a_pipeline_checks_once_for_both_stages(sc: Scenario003, calls: list[int
     assert len(calls) == 2
     assert fit.summary == alone.summary
     assert acc.summary["plausibility"]["st1"]["checked"]
+
+
+def test_concurrent_callers_of_one_check_wait_for_it(sc: Scenario003, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Two threads asking for the same check while it runs (the branches of reconstruction side by side): it
+    runs once, both get its result; an error of the check reaches both, and nothing is kept."""
+    import threading
+    import time
+    from concurrent.futures import ThreadPoolExecutor
+
+    started, release = threading.Event(), threading.Event()
+    count: list[int] = []
+    real = plausibility.check_star_tracker_gyro
+
+    def slow(*args: Any, **kwargs: Any) -> Any:
+        count.append(1)
+        started.set()
+        assert release.wait(30)
+        if kwargs["sensor"] == "broken":
+            raise plausibility.PlausibilityError("too few samples")
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(plausibility, "check_star_tracker_gyro", slow)
+    monkeypatch.setattr(plausibility, "_cache", type(plausibility._cache)())
+    args = _args(sc)
+    for sensor in ("st1", "broken"):
+        started.clear()
+        release.clear()
+        count.clear()
+        with ThreadPoolExecutor(2) as pool:
+            first = pool.submit(plausibility.checked, *args, sensor=sensor)
+            assert started.wait(30)
+            second = pool.submit(plausibility.checked, *args, sensor=sensor)
+            time.sleep(0.3)  # the second caller is at its check by now (a digest of these arrays takes ~1 ms)
+            release.set()
+            if sensor == "broken":
+                for f in (first, second):
+                    with pytest.raises(plausibility.PlausibilityError, match="too few"):
+                        f.result()
+            else:
+                assert first.result().summary() == second.result().summary()
+                assert first.result() is not second.result()
+        assert len(count) == 1
+        assert not plausibility._running
+    assert len(plausibility._cache) == 1

@@ -18,9 +18,14 @@ What flows between stages:
   gets the screened but uncorrected rates, since it estimates the drift itself. The values used are
   listed under ``calibrations`` in the summary.
 
+After data_screening the stages run in two branches side by side (:data:`BRANCHES`, ``parallel_stages``):
+star_tracker_accuracy in one, gyro_bias_fit -> orbital_attitude -> alignment_calibration in the other, as
+threads of the worker or as tasks of the Dask cluster (app.jobs.partitions.map_concurrent). The result is
+assembled in pipeline order, so it is the same as when the stages run one after the other.
+
 Progress is weighted by the stages' typical cost; a stage that fails with a task error ends the
-pipeline (or, with ``continue_on_error``, is recorded and the next stage runs); any other exception is
-an internal error and goes to the runner. The summary has every
+pipeline (the first such stage in pipeline order; or, with ``continue_on_error``, is recorded and the next
+stage runs); any other exception is an internal error and goes to the runner. The summary has every
 stage's own summary under ``stages.<name>.summary``; tables, files and figures keep their names, prefixed with
 the stage (``gyro_bias_fit__residuals.csv``), so the standard job report is the combined report.
 """
@@ -28,7 +33,9 @@ the stage (``gyro_bias_fit__residuals.csv``), so the standard job report is the 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping
+import threading
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field, replace
 from typing import Any, Literal
 
 import numpy as np
@@ -36,6 +43,7 @@ from matplotlib.figure import Figure
 from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
+from app.jobs.partitions import map_concurrent
 from app.jobs.registry import JobType
 from processing.attitude import rotations
 from processing.screening.flags import filter_streams
@@ -74,6 +82,10 @@ class Params(BaseModel):
     apply_gyro_bias: bool = Field(True, description="remove the fitted gyro bias from the rates of "
                                                     "orbital_attitude")
     continue_on_error: bool = Field(False, description="record a failing stage and go on with the next")
+    parallel_stages: bool = Field(True, description=(
+        "run the branches of the pipeline that depend only on the screened data (star_tracker_accuracy; "
+        "gyro_bias_fit -> orbital_attitude -> alignment_calibration) side by side: threads of the worker, or "
+        "tasks of the Dask cluster; the result is the same as in order (false)"))
     min_alignment_rate_variation_deg_s: float = Field(
         0.01, ge=0.0, le=10.0, description=(
             "alignment_calibration runs only when the body rate (60-s means) varies by at least this much (std "
@@ -287,76 +299,202 @@ def _bias_from(summary: Mapping[str, Any]) -> NDArray[np.float64] | None:
     return bias if np.all(np.isfinite(bias)) else None
 
 
+@dataclass
+class _Outcome:
+    """One stage's part of the pipeline result: its ``stages`` entry, its result when it ran, the notes it
+    adds (in order) and the calibrations it passes on."""
+
+    name: str
+    record: dict[str, Any]
+    result: TaskResult | None = None
+    notes: list[str] = field(default_factory=list)
+    calibrations: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def stops(self) -> bool:
+        """A failed stage that ends the pipeline (``continue_on_error`` false)."""
+        return "stop" in self.record
+
+
+@dataclass(frozen=True)
+class _Branch:
+    """Stages that run one after the other on the same screened streams (a branch of the pipeline)."""
+
+    names: tuple[str, ...]
+    inputs: TaskInputs
+    streams: dict[str, dict[str, NDArray[Any]]]
+    params: Params
+    stage_params: dict[str, BaseModel]
+    order: tuple[str, ...]
+
+
+def _run_stage(name: str, jt: JobType, inputs: TaskInputs, view: Mapping[str, Mapping[str, NDArray[Any]]],
+               params: Params, stage_params: BaseModel, progress: Progress) -> _Outcome:
+    """The stage on its view of the window: skipped with the reason, failed (a TaskError; ``record["stop"]``
+    when the pipeline must end) or succeeded with its result."""
+    stage_inputs = _stage_inputs(inputs, view, jt)
+    for arc_check in ARC_REQUIREMENTS.get(name, ()):
+        if not isinstance(stage_inputs, str):
+            stage_inputs = arc_check(stage_inputs, params)
+    if isinstance(stage_inputs, str):
+        progress(1.0, "skipped")
+        return _Outcome(name, {"status": "skipped", "reason": stage_inputs}, notes=[f"{name} skipped: {stage_inputs}"])
+    progress(0.0, "starting")
+    try:
+        result = jt.run(stage_inputs, stage_params, progress)
+    except TaskError as exc:  # JobCancelled and crashes (a ValueError included) propagate to the runner
+        record: dict[str, Any] = {"status": "failed", "error": str(exc) or type(exc).__name__}
+        if not params.continue_on_error:
+            return _Outcome(name, {**record, "stop": f"pipeline stage {name} failed: {exc}"})
+        return _Outcome(name, record, notes=[f"{name} failed: {exc}"])
+    progress(1.0, "done")
+    record = {"status": "succeeded",
+              "summary": {"warnings": [w.as_dict() for w in result.warnings], **result.summary},
+              "notes": list(result.notes), "params": stage_params.model_dump(mode="json")}
+    return _Outcome(name, record, result, notes=[f"{name}: {n}" for n in result.notes])
+
+
+def _run_branch(branch: _Branch, progress: Progress) -> list[_Outcome]:
+    """The branch's stages in order (module level: a Dask task runs it). gyro_bias_fit's bias is removed from
+    the rates of the later stages of :data:`BIAS_CORRECTED_STAGES`; a stage that must end the pipeline ends
+    the branch."""
+    available = _available()
+    bias_free: dict[str, NDArray[Any]] | None = None
+    out: list[_Outcome] = []
+    for name in branch.names:
+        view: Mapping[str, Mapping[str, NDArray[Any]]] = branch.streams
+        if name in BIAS_CORRECTED_STAGES and bias_free is not None:
+            view = {**branch.streams, "gyro": bias_free}
+
+        def stage_progress(fraction: float, stage: str, _name: str = name) -> None:
+            progress(fraction, f"{_name}: {stage}")
+
+        outcome = _run_stage(name, available[name], branch.inputs, view, branch.params, branch.stage_params[name],
+                             stage_progress)
+        out.append(outcome)
+        if outcome.stops:
+            break
+        if (name == "gyro_bias_fit" and outcome.result is not None and branch.params.apply_gyro_bias
+                and "gyro" in branch.streams):
+            bias = _bias_from(outcome.result.summary)
+            if bias is not None:
+                bias_free = correct_gyro_bias(branch.streams["gyro"], bias, branch.inputs.spacecraft)
+                outcome.calibrations = {"gyro_bias_rad_s": bias.tolist(), "gyro_bias_applied_to": [
+                    s for s in BIAS_CORRECTED_STAGES if s in branch.order]}
+    return out
+
+
+BRANCHES: tuple[tuple[str, ...], ...] = (
+    ("star_tracker_accuracy",),
+    ("gyro_bias_fit", "orbital_attitude", "alignment_calibration"),
+)
+"""The stages after data_screening, in branches that depend on nothing but the screened streams: each branch
+runs its stages in order (orbital_attitude needs gyro_bias_fit's bias), the branches side by side
+(``parallel_stages``). Every stage of :data:`STAGES` but data_screening is in exactly one branch."""
+
+
+class _Meter:
+    """The pipeline's progress from its stages' own fractions, weighted by :data:`STAGES`' costs; safe to call
+    from the threads of concurrent branches (the bar moves by the sum, the message is the latest)."""
+
+    def __init__(self, progress: Progress, order: Sequence[str]) -> None:
+        self.progress = progress
+        self.weights = {s: dict(STAGES)[s] for s in order}
+        self.total = sum(self.weights.values())
+        self.fractions = dict.fromkeys(order, 0.0)
+        self.label = "starting"
+        self.lock = threading.Lock()
+
+    def overall(self) -> float:
+        lo, hi = PROGRESS_SPAN
+        return lo + (hi - lo) * sum(self.weights[s] * f for s, f in self.fractions.items()) / self.total
+
+    def stage(self, name: str) -> Progress:
+        def report(fraction: float, label: str) -> None:
+            fraction = min(max(fraction, 0.0), 1.0) if math.isfinite(fraction) else 0.0
+            with self.lock:  # held while reporting, so that the values reported never go back
+                self.fractions[name] = max(self.fractions[name], fraction)
+                self.label = label
+                self.progress(self.overall(), label)
+        return report
+
+    def again(self, finished: Sequence[str] = ()) -> None:
+        """The latest value and message once more, the ``finished`` stages counted whole (a Dask task reports
+        no progress of its own), so that the runner's callback checks for a cancel."""
+        with self.lock:
+            for name in finished:
+                self.fractions[name] = 1.0
+            self.progress(self.overall(), self.label)
+
+    def branch(self, names: Sequence[str]) -> Progress:
+        """A branch's callback: the stage is the prefix of the label (``<stage>: <what>``)."""
+        def report(fraction: float, label: str) -> None:
+            name = label.split(":", 1)[0]
+            self.stage(name if name in self.weights else names[0])(fraction, label)
+        return report
+
+
 def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
     available = _available()
     order, notes = plan(inputs, params, available)
     stage_params = _stage_params(available, params)
-    weights = dict(STAGES)
-    total = sum(weights[s] for s in order)
-    lo_span, hi_span = PROGRESS_SPAN
+    meter = _Meter(progress, order)
     streams: dict[str, dict[str, NDArray[Any]]] = {k: dict(v) for k, v in inputs.streams.items()}
-    raw_gyro_bias_free: dict[str, NDArray[Any]] | None = None
+    outcomes: list[_Outcome] = []
+    if "data_screening" in order:
+        screening = _run_stage("data_screening", available["data_screening"], inputs, streams, params,
+                               stage_params["data_screening"],
+                               lambda f, label: meter.stage("data_screening")(f, f"data_screening: {label}"))
+        outcomes.append(screening)
+        if screening.result is not None and params.apply_screening:
+            streams, removed = apply_screening(
+                streams, screening.result,
+                bridge_gyro_s=params.max_bridge_s if params.gyro_rejections == "bridge" else None)
+            screening.calibrations = {"screened_out": removed}
+            if not removed:
+                screening.notes.append("data_screening rejected no samples (or its flags were not understood)")
+    if not (outcomes and outcomes[0].stops):
+        context = replace(inputs, streams={})  # the branches take the screened streams, not the raw ones again
+        branches = [_Branch(tuple(s for s in names if s in order), context, streams, params, stage_params,
+                            tuple(order)) for names in BRANCHES]
+        branches = [b for b in branches if b.names]
+        if params.parallel_stages:
+            for branch_outcomes in map_concurrent(_run_branch, branches, [meter.branch(b.names) for b in branches],
+                                                  poll=lambda done: meter.again(
+                                                      [s for i in done for s in branches[i].names])):
+                outcomes += branch_outcomes
+        else:
+            for b in branches:
+                outcomes += _run_branch(b, meter.branch(b.names))
+    return _merge(outcomes, order, notes)
+
+
+def _merge(outcomes: Sequence[_Outcome], order: Sequence[str], notes: list[str]) -> TaskResult:
+    """The pipeline's result from its stages' outcomes, taken in pipeline order (so the same whichever ran
+    first): a stage that must end the pipeline raises its TaskError, as a serial run would have."""
+    by_name = {o.name: o for o in outcomes}
     stages: dict[str, dict[str, Any]] = {}
     calibrations: dict[str, Any] = {}
     tables: dict[str, dict[str, NDArray[Any]]] = {}
     files: dict[str, tuple[bytes, str]] = {}
     warnings: list[ResultWarning] = []
-    done = 0.0
     for name in order:
-        jt = available[name]
-        start = lo_span + (hi_span - lo_span) * done / total
-        width = (hi_span - lo_span) * weights[name] / total
-        done += weights[name]
-
-        def stage_progress(fraction: float, stage: str, _start: float = start, _width: float = width,
-                           _name: str = name) -> None:
-            fraction = min(max(fraction, 0.0), 1.0) if math.isfinite(fraction) else 0.0
-            progress(_start + _width * fraction, f"{_name}: {stage}")
-
-        view = streams
-        if name in BIAS_CORRECTED_STAGES and raw_gyro_bias_free is not None:
-            view = {**streams, "gyro": raw_gyro_bias_free}
-        stage_inputs = _stage_inputs(inputs, view, jt)
-        for arc_check in ARC_REQUIREMENTS.get(name, ()):
-            if not isinstance(stage_inputs, str):
-                stage_inputs = arc_check(stage_inputs, params)
-        if isinstance(stage_inputs, str):
-            stages[name] = {"status": "skipped", "reason": stage_inputs}
-            notes.append(f"{name} skipped: {stage_inputs}")
-            stage_progress(1.0, "skipped")
+        o = by_name.get(name)
+        if o is None:
             continue
-        stage_progress(0.0, "starting")
-        try:
-            result = jt.run(stage_inputs, stage_params[name], stage_progress)
-        except TaskError as exc:  # JobCancelled and crashes (a ValueError included) propagate to the runner
-            stages[name] = {"status": "failed", "error": str(exc) or type(exc).__name__}
-            if not params.continue_on_error:
-                raise TaskError(f"pipeline stage {name} failed: {exc}") from exc
-            notes.append(f"{name} failed: {exc}")
+        if o.stops:
+            raise TaskError(o.record["stop"])
+        stages[name] = o.record
+        notes.extend(o.notes)
+        calibrations.update(o.calibrations)
+        if o.result is None:
             continue
-        stage_progress(1.0, "done")
-        stages[name] = {"status": "succeeded",
-                        "summary": {"warnings": [w.as_dict() for w in result.warnings], **result.summary},
-                        "notes": list(result.notes), "params": stage_params[name].model_dump(mode="json")}
         warnings += [ResultWarning(w.code, f"{name}: {w.message}", {**w.evidence, "stage": name})
-                     for w in result.warnings]
-        notes.extend(f"{name}: {n}" for n in result.notes)
-        for table_name, columns in result.tables.items():
+                     for w in o.result.warnings]
+        for table_name, columns in o.result.tables.items():
             tables[f"{name}{SEPARATOR}{table_name}"] = columns
-        for file_name, content in result.files.items():
+        for file_name, content in o.result.files.items():
             files[f"{name}{SEPARATOR}{file_name}"] = content
-        if name == "data_screening" and params.apply_screening:
-            streams, removed = apply_screening(
-                streams, result, bridge_gyro_s=params.max_bridge_s if params.gyro_rejections == "bridge" else None)
-            calibrations["screened_out"] = removed
-            if not removed:
-                notes.append("data_screening rejected no samples (or its flags were not understood)")
-        if name == "gyro_bias_fit" and params.apply_gyro_bias and "gyro" in streams:
-            bias = _bias_from(result.summary)
-            if bias is not None:
-                raw_gyro_bias_free = correct_gyro_bias(streams["gyro"], bias, inputs.spacecraft)
-                calibrations["gyro_bias_rad_s"] = bias.tolist()
-                calibrations["gyro_bias_applied_to"] = [s for s in BIAS_CORRECTED_STAGES if s in order]
     summary: dict[str, Any] = {
         "stages_run": [s for s in order if stages.get(s, {}).get("status") == "succeeded"],
         "stages": stages,
