@@ -139,8 +139,10 @@ def map_concurrent(func: Callable[[T, Progress], R], parts: Sequence[T], progres
     """``[func(p, progress) for p, progress in zip(parts, progresses)]``, every part at the same time.
 
     Here: a thread per part, each given its own progress callback. On a Dask worker: a task per part on the
-    same cluster (the parts scattered to the workers), each given :func:`no_progress`, since a callback that
-    writes to the job's database does not travel; the job's progress then moves as the parts finish. Either
+    same cluster (each part and its data on a worker of its own while there are workers), each given
+    :func:`no_progress`, since a callback that writes to the job's database does not travel: the calling
+    thread reports for them instead, ``progress(0.0, "running on a Dask worker")`` at the start and
+    ``progress(1.0, "done on a Dask worker")`` as each finishes. Either
     way the calling thread calls ``poll(indices of the parts finished)`` every :data:`POLL_S` s while it waits, so a
     ``poll`` that raises (a cancelled job) stops the wait: the remaining Dask tasks are cancelled, and
     threads, which cannot be stopped, are waited for (their own progress callbacks raise the same way).
@@ -167,9 +169,15 @@ def map_concurrent(func: Callable[[T, Progress], R], parts: Sequence[T], progres
                 data = client.scatter([part], workers=where, hash=False)[0]  # a list: a dict part is no mapping
                 futures.append(client.submit(func, data, no_progress, pure=False, workers=where,
                                              allow_other_workers=True))
+            reported: set[int] = set()
             try:
+                for progress in progresses:
+                    progress(0.0, "running on a Dask worker")
                 while True:
                     finished = [i for i, f in enumerate(futures) if f.done()]
+                    for i in sorted(set(finished) - reported):
+                        progresses[i](1.0, "done on a Dask worker")
+                        reported.add(i)
                     poll(finished)
                     if len(finished) == len(futures):
                         break

@@ -215,9 +215,10 @@ def _branch(part, progress):
 
 def _two_branches(sleep_s: float):
     polls: list[list[int]] = []
+    reports: list[tuple[str, float, str]] = []
     out = map_concurrent(_branch, [{"name": "a", "sleep_s": sleep_s}, {"name": "b", "sleep_s": sleep_s}],
-                         [lambda f, s: None] * 2, poll=polls.append)
-    return out, polls
+                         [lambda f, s, _k=k: reports.append((_k, f, s)) for k in "ab"], poll=polls.append)
+    return out, polls, reports
 
 
 def test_concurrent_branches_run_on_two_workers(cluster):
@@ -226,7 +227,10 @@ def test_concurrent_branches_run_on_two_workers(cluster):
     _, dclient = cluster
     dclient.wait_for_workers(2, timeout=180)
     dclient.run(importlib.import_module, __name__)  # every worker has imported this module (as after a first job)
-    out, polls = dclient.submit(_two_branches, 1.0, pure=False).result(timeout=120)
+    out, polls, reports = dclient.submit(_two_branches, 1.0, pure=False).result(timeout=120)
+    # the job's thread reports for the tasks: both started, then each done
+    assert reports[:2] == [("a", 0.0, "running on a Dask worker"), ("b", 0.0, "running on a Dask worker")]
+    assert sorted(reports[2:]) == [("a", 1.0, "done on a Dask worker"), ("b", 1.0, "done on a Dask worker")]
     assert [name for name, _, _ in out] == ["a", "b"]
     pids = {pid for _, pid, _ in out}
     assert len(pids) == 2 and pids <= set(dclient.run(os.getpid).values())

@@ -418,19 +418,24 @@ class _Meter:
                 self.progress(self.overall(), label)
         return report
 
-    def again(self, finished: Sequence[str] = ()) -> None:
-        """The latest value and message once more, the ``finished`` stages counted whole (a Dask task reports
-        no progress of its own), so that the runner's callback checks for a cancel."""
+    def again(self) -> None:
+        """The latest value and message once more, so that the runner's callback checks for a cancel."""
         with self.lock:
-            for name in finished:
-                self.fractions[name] = 1.0
             self.progress(self.overall(), self.label)
 
     def branch(self, names: Sequence[str]) -> Progress:
-        """A branch's callback: the stage is the prefix of the label (``<stage>: <what>``)."""
+        """A branch's callback: the stage is the prefix of the label (``<stage>: <what>``); a label without one
+        is the whole branch's (a Dask task's start and end, reported by the job's thread), shown as
+        ``<stage> -> <stage>: <what>``."""
         def report(fraction: float, label: str) -> None:
             name = label.split(":", 1)[0]
-            self.stage(name if name in self.weights else names[0])(fraction, label)
+            if name in self.weights:
+                self.stage(name)(fraction, label)
+                return
+            with self.lock:
+                for s in names[:-1]:
+                    self.fractions[s] = max(self.fractions[s], fraction)
+            self.stage(names[-1])(fraction, f"{' -> '.join(names)}: {label}")
         return report
 
 
@@ -460,8 +465,7 @@ def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
         branches = [b for b in branches if b.names]
         if params.parallel_stages:
             for branch_outcomes in map_concurrent(_run_branch, branches, [meter.branch(b.names) for b in branches],
-                                                  poll=lambda done: meter.again(
-                                                      [s for i in done for s in branches[i].names])):
+                                                  poll=lambda done: meter.again()):
                 outcomes += branch_outcomes
         else:
             for b in branches:
