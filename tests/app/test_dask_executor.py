@@ -79,6 +79,8 @@ def test_same_results_on_local_and_dask_executors(settings, cluster):
     available = registry()
     jobs = [("telemetry_coverage", {}), ("executor_check", {"duration_s": 0.2})]
     jobs += [(t, {}) for t in ("star_tracker_accuracy", "gyro_bias_fit") if t in available]
+    # the pipeline: its two branches go to two workers on Dask, to two threads locally
+    jobs += [("reconstruction", {"stage_params": {"gyro_bias_fit": {"subintervals": []}}})]
     with open_client(settings) as local:
         make_spacecraft(local, "meteor", scenario.config)
         for stream, columns in scenario.streams.items():
@@ -86,6 +88,8 @@ def test_same_results_on_local_and_dask_executors(settings, cluster):
         on_local = _run_all(local, jobs)
     with open_client(dask_settings(settings, cluster)) as remote:
         on_dask = _run_all(remote, jobs)
+        # the executor warmed the workers up when it connected (the job types imported before a job)
+        assert all(cluster[1].run(lambda dask_worker: "attitude-warm-up" in dask_worker.plugins).values())
         for job_l, job_d in zip(on_local, on_dask, strict=True):
             assert job_l["status"] == job_d["status"] == "succeeded", (job_l["error"], job_d["error"])
             result_l, result_d = dict(job_l["result"]), dict(job_d["result"])
