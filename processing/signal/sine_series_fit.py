@@ -16,6 +16,7 @@ from numpy.typing import ArrayLike, NDArray
 __all__ = ["SineSeriesFit"]
 
 _RESEED = 32  # evaluation: harmonics between exact sin/cos seeds of the recurrence
+_CHUNK = 16_384  # evaluation: samples per block (two (_CHUNK, _RESEED) float64 work arrays, 4 MiB each)
 
 
 @dataclass(frozen=True)
@@ -56,41 +57,62 @@ class SineSeriesFit:
     def _out(self, values: NDArray) -> NDArray:
         return values[..., 0] if self.vector else values
 
-    def _sum(self, t_s: ArrayLike, derivative: bool) -> NDArray:
+    def _sums(self, t_s: ArrayLike, value: bool, derivative: bool) -> tuple[NDArray, NDArray]:
+        """f(t) and/or df/dt at t_s as (n, K) arrays (an empty (0, K) for the one not asked for).
+
+        sin/cos(m theta) come from the angle-addition recurrence over m (vectorised over samples),
+        re-seeded exactly every _RESEED harmonics so the rounding error stays ~_RESEED eps; each block of
+        _RESEED harmonics is summed by one matrix product, over blocks of _CHUNK samples.
+        """
         t = np.asarray(t_s, dtype=np.float64)
         flat = t.reshape(-1)
-        tau = (flat - self.t1_s) / self.span_s
+        n = flat.size
         m = np.arange(1, self.harmonics + 1, dtype=np.float64)
         slope = np.reshape(self.slope, -1)
         k = slope.size
         sine = np.reshape(self.sine, (self.harmonics, k))
-        if derivative:
-            out = np.broadcast_to(slope, (flat.size, k)).copy()
-            coef = sine * (np.pi * m / self.span_s)[:, None]
-        else:
-            out = np.reshape(self.const, -1) + np.outer(flat - self.t1_s, slope)
-            coef = sine
-        if self.harmonics:
-            # sin/cos(m theta) by the angle-addition recurrence over m (vectorised over samples), re-seeded
-            # exactly every _RESEED harmonics so the rounding error stays ~_RESEED eps.
-            theta = np.pi * tau
+        val = np.reshape(self.const, -1) + np.outer(flat - self.t1_s, slope) if value else np.empty((0, k))
+        der = np.broadcast_to(slope, (n, k)).copy() if derivative else np.empty((0, k))
+        d_coef = sine * (np.pi * m / self.span_s)[:, None]
+        theta_all = np.pi * ((flat - self.t1_s) / self.span_s)
+        for lo in range(0, n if self.harmonics else 0, _CHUNK):
+            theta = theta_all[lo:lo + _CHUNK]
             s1, c1 = np.sin(theta), np.cos(theta)
             sm, cm = s1, c1
-            for j in range(self.harmonics):
-                out += np.outer(cm if derivative else sm, coef[j])
-                if (j + 1) % _RESEED == 0:
-                    sm, cm = np.sin((j + 2) * theta), np.cos((j + 2) * theta)
-                else:
-                    sm, cm = sm * c1 + cm * s1, cm * c1 - sm * s1
-        return self._out(out.reshape(*t.shape, k))
+            s_blk = np.empty((theta.size, _RESEED), order="F")
+            c_blk = np.empty((theta.size, _RESEED), order="F")
+            for j0 in range(0, self.harmonics, _RESEED):
+                b = min(_RESEED, self.harmonics - j0)
+                for i in range(b):
+                    s_blk[:, i], c_blk[:, i] = sm, cm
+                    j = j0 + i
+                    if (j + 1) % _RESEED == 0:
+                        sm, cm = np.sin((j + 2) * theta), np.cos((j + 2) * theta)
+                    else:
+                        sm, cm = sm * c1 + cm * s1, cm * c1 - sm * s1
+                if value:
+                    val[lo:lo + _CHUNK] += s_blk[:, :b] @ sine[j0:j0 + b]
+                if derivative:
+                    der[lo:lo + _CHUNK] += c_blk[:, :b] @ d_coef[j0:j0 + b]
+        return val, der
 
     def evaluate(self, t_s: ArrayLike) -> NDArray:
         """f(t) at t_s (...) seconds; returns (...) for a 1-D fit, (..., K) otherwise (003 §1.3)."""
-        return self._sum(t_s, derivative=False)
+        shape = np.shape(t_s)
+        val, _ = self._sums(t_s, value=True, derivative=False)
+        return self._out(val.reshape(*shape, val.shape[-1]))
 
     def derivative(self, t_s: ArrayLike) -> NDArray:
         """Analytic df/dt = slope + sum_m sine_m (pi m / span) cos(pi m tau) [unit of y per second]."""
-        return self._sum(t_s, derivative=True)
+        shape = np.shape(t_s)
+        _, der = self._sums(t_s, value=False, derivative=True)
+        return self._out(der.reshape(*shape, der.shape[-1]))
+
+    def evaluate_with_derivative(self, t_s: ArrayLike) -> tuple[NDArray, NDArray]:
+        """(:meth:`evaluate`, :meth:`derivative`) at t_s from one pass of the harmonic recurrence."""
+        shape = np.shape(t_s)
+        val, der = self._sums(t_s, value=True, derivative=True)
+        return self._out(val.reshape(*shape, val.shape[-1])), self._out(der.reshape(*shape, der.shape[-1]))
 
     def residuals(self, y: ArrayLike) -> NDArray:
         """y - fitted at the samples (shape of y)."""

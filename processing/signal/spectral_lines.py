@@ -63,24 +63,28 @@ def detect_lines(
     50..500 resolution cells: a longer window makes the floor, hence the threshold, steadier). For
     noise alone A^2 is exponential (2 degrees of freedom), so its mean is median / ln 2 and the
     chance that any of the F_ind independent cells exceeds mean ln(F_ind / false_alarm) is about
-    false_alarm. A line is a local maximum above that threshold, the largest within +-2 resolution
-    cells, in min_freq_hz < f <= max_freq_hz and below the last resolution cell (Nyquist). The floor
-    is taken inside that band only. Returned sorted by frequency.
+    false_alarm; F_ind and the floor window count resolution cells of Spectrum.resolution_hz, not grid
+    steps (a fast-length FFT grid is a little finer than 1/span). A line is a local maximum above that
+    threshold, the largest within +-2 resolution cells, in min_freq_hz < f <= max_freq_hz and below the
+    last resolution cell (Nyquist). The floor is taken inside that band only. Returned sorted by frequency.
     """
     f = spectrum.freq_hz
     amp = spectrum.amplitude.reshape(f.size, -1)
     df = float(f[1] - f[0]) if f.size > 1 else 1.0
     cells_per_res = max(1, int(round(spectrum.resolution_hz / df)))
+    per_res = spectrum.resolution_hz / df  # grid steps per resolution cell: not an integer when padded
+    if abs(per_res - cells_per_res) < 1e-6 * cells_per_res:  # (over)sampled 1/span grids: exactly an integer
+        per_res = float(cells_per_res)
     top = f[-1] - spectrum.resolution_hz  # the Nyquist cell: amplitude undetermined (sin term vanishes)
     band = (f > min_freq_hz) & (f <= (top if max_freq_hz is None else min(max_freq_hz, top)))
-    n_ind = max(2.0, band.sum() / cells_per_res)
+    n_ind = max(2.0, band.sum() / max(1.0, per_res))
     guard = 2 * cells_per_res
     out = []
     idx = np.flatnonzero(band)
     if idx.size < 3:
         return []
     if floor_window_hz is None:  # 50..500 resolution cells, about 1/20 of the band
-        win = int(np.clip(n_ind / 20.0, 50, 500)) * cells_per_res
+        win = int(round(int(np.clip(n_ind / 20.0, 50, 500)) * max(1.0, per_res)))
     else:
         win = int(round(floor_window_hz / df))
     win = max(5, win | 1)

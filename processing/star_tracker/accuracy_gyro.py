@@ -402,7 +402,7 @@ def _compare_segment(part: _ComparePart) -> _SegmentComparison:
     inside = (tg >= 0.0) & (tg <= fit.span_s)
     tg_in = tg[inside]
     g_sm = gfit.fitted[inside]
-    st = rate_from_mrp(fit.evaluate(tg_in), fit.derivative(tg_in)) @ dcm_BS.T
+    st = rate_from_mrp(*fit.evaluate_with_derivative(tg_in)) @ dcm_BS.T
     off = np.mean(g_sm - st, axis=0)
     return _SegmentComparison(
         time_tai_ns=g_seg[inside], w_gyro=g_sm - off, w_st=st, offset=off, rss_smoothing=rss_s,

@@ -16,6 +16,7 @@ from processing.signal.sine_series import (
     select_harmonics,
     sine_series_design,
 )
+from processing.signal.sine_series_fit import SineSeriesFit
 
 N = 401
 H_S = 3.0
@@ -244,3 +245,25 @@ def test_sine_design_recurrence_matches_numpy() -> None:
     for m in (0, 1, 2, 3, 64, 65, 66, 400):
         ref = np.column_stack([np.ones_like(tau), tau, np.sin(np.pi * tau[:, None] * np.arange(1, m + 1))])
         np.testing.assert_allclose(sine_series_design(tau, m, 0.0, 1.0), ref, rtol=0, atol=1e-11)
+
+
+def test_evaluation_across_reseeds_and_sample_blocks_is_the_explicit_sum():
+    # 70 harmonics (re-seeded at 32 and 64) at 40,000 times (three blocks of samples), 3 components;
+    # evaluate_with_derivative (one recurrence pass, used by the gyro comparison) is evaluate + derivative.
+    rng = np.random.default_rng(11)
+    n_h, t1, span = 70, -3.0, 1200.0
+    sine = rng.standard_normal((n_h, 3)) / np.arange(1, n_h + 1)[:, None]
+    fit = SineSeriesFit(t1, span, n_h, np.array([0.1, -0.2, 0.3]), np.array([1e-3, 0.0, -2e-3]), sine,
+                        np.zeros((5, 3)), np.zeros(3), 5, 0, "dst", False)
+    tt = rng.uniform(t1, t1 + span, (200, 200))
+    tau = (tt.reshape(-1) - t1) / span
+    m = np.arange(1, n_h + 1)
+    ref = fit.const + np.outer(tt.reshape(-1) - t1, fit.slope) + np.sin(np.pi * np.outer(tau, m)) @ sine
+    ref_d = fit.slope + np.cos(np.pi * np.outer(tau, m)) @ (sine * (np.pi * m / span)[:, None])
+    val, der = fit.evaluate_with_derivative(tt)
+    assert val.shape == der.shape == (200, 200, 3)
+    np.testing.assert_allclose(val.reshape(-1, 3), ref, rtol=0, atol=1e-13)
+    np.testing.assert_allclose(der.reshape(-1, 3), ref_d, rtol=0, atol=1e-15)
+    np.testing.assert_array_equal(val, fit.evaluate(tt))
+    np.testing.assert_array_equal(der, fit.derivative(tt))
+    assert fit.evaluate(t1).shape == (3,) and fit.derivative(np.zeros(0)).shape == (0, 3)

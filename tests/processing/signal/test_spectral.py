@@ -212,3 +212,39 @@ def test_every_route_has_a_work_guard(monkeypatch):
     monkeypatch.setattr(spectral, "MAX_FREQUENCIES", 1 << 25)
     sparse = np.r_[0.1 * np.arange(50), 1.0e5 + 0.1 * np.arange(50)]
     assert amplitude_spectrum_of_samples(sparse, np.sin(sparse)).method == "lomb_scargle"
+
+
+@pytest.mark.parametrize("gapped", [False, True])
+def test_lengths_with_a_large_prime_factor_are_padded_to_a_fast_length_and_stay_the_papers_sum(gapped):
+    # Issue 24: 24 h of 10 Hz with both ends is 864,001 = 31 x 47 x 593 nodes, which pocketfft transforms
+    # by Bluestein (~9x slower). Padded to an even fast length M the grid is k / (M h), a little finer than
+    # 1/(N h), ends at Nyquist, and A(f) there is still the 003 §1.5 sum. Here N = 1201 (prime): M = 1250.
+    rng = np.random.default_rng(8)
+    h = 0.1
+    idx = np.delete(np.arange(1201), np.r_[100:130]) if gapped else np.arange(1201)
+    x = rng.standard_normal(idx.size) + 0.2 * np.cos(2 * np.pi * 1.7 * h * idx)
+    spec = amplitude_spectrum_gapped(h * idx, x, h) if gapped else amplitude_spectrum(x, h)
+    assert spectral.fft_length(1201) == 1250
+    np.testing.assert_allclose(spec.freq_hz, np.arange(626) / (1250 * h), rtol=1e-12)
+    assert spec.freq_hz[-1] == pytest.approx(1.0 / (2 * h), rel=1e-12)
+    assert spec.resolution_hz == pytest.approx(1.0 / (1201 * h), rel=1e-12)  # independent cells: unchanged
+    pick = np.array([1, 17, 255, 510, 625])
+    np.testing.assert_allclose(spec.periodogram[pick], _paper_periodogram(x, h, spec.freq_hz[pick], idx + 1),
+                               rtol=1e-10)
+    # a fast length is left as it is: the grid of 1200 samples is k / (1200 h), as before
+    assert spectral.fft_length(1200) == 1200
+    assert amplitude_spectrum(x[:1200], h).freq_hz.size == 601
+
+
+def test_detector_counts_resolution_cells_not_grid_steps_on_a_padded_grid():
+    # A flat spectrum (A = 1) with one spike a: the threshold is ln(F_ind / false_alarm) / ln 2, with F_ind
+    # the number of resolution cells in the band - here 1.25 grid steps each, as after padding.
+    res, per_res, n = 1e-3, 1.25, 20_001
+    f = np.arange(n) * (res / per_res)
+    amp = np.ones(n)
+    amp[8000] = 12.0
+    spec = spectral.Spectrum(f, amp, 2 * n, "fft", res)
+    (peak,) = detect_lines(spec, false_alarm=1e-3)
+    n_band = int(np.sum((f > 0) & (f <= f[-1] - res)))
+    assert peak.freq_hz == f[8000]
+    assert peak.ratio == pytest.approx(144.0 * np.log(2.0) / np.log(n_band / per_res / 1e-3), rel=1e-12)
