@@ -5,9 +5,9 @@ made on request from the Parquet (:func:`csv_chunks`, streamed by the artifact d
 ``<table>.csv`` name); a table is stored with at most :data:`TABLE_MAX_ROWS` rows; the artifacts of one job stay
 within :data:`JOB_ARTIFACT_MAX_BYTES` (a table, file or figure that would go beyond is left out). What was
 done is stated in the summary's ``outputs`` and in a note. Figures (stored here only with
-``ATTITUDE_FIGURES=eager``; by default drawn on first request, app.jobs.figures) are drawn once, with every line of more than
-:data:`FIGURE_LINE_MAX_POINTS` points thinned for display first (:func:`thin_lines`: each pixel column's first,
-last, lowest and highest point kept, so the picture is the same and spikes stay).
+``ATTITUDE_FIGURES=eager``; by default drawn on first request, app.jobs.figures) are drawn once, with every line
+of more than :data:`FIGURE_LINE_MAX_POINTS` points thinned for display first (:func:`thin_lines`: each pixel
+column's first, last, lowest and highest point kept, so the picture is the same and spikes stay).
 """
 
 from __future__ import annotations

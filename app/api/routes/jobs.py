@@ -128,8 +128,8 @@ class ArtifactOut(BaseModel):
 def list_artifacts(job_id: str, session: SessionDep, who: Viewer) -> list[ArtifactOut]:
     """The job's stored artifacts, then the figures it makes on request (``on_request``)."""
     job, _sc = service.get_job(session, job_id, who)
-    return [ArtifactOut(**{**a, "kind": cast(ArtifactKind, a["kind"])}, url=f"/api/v1/jobs/{job_id}/artifacts/{a['name']}")
-            for a in figures.listing(job)]
+    return [ArtifactOut(**{**a, "kind": cast(ArtifactKind, a["kind"])},
+                        url=f"/api/v1/jobs/{job_id}/artifacts/{a['name']}") for a in figures.listing(job)]
 
 
 def artifact_response(f: StoredFile, headers: dict[str, str] | None = None) -> Response:
