@@ -89,7 +89,7 @@ def figure_artifact(session: Session, store: ArtifactStore, job: Job, name: str)
     """The stored artifact of figure ``name`` (no ``.png``), drawn and stored first when the job made it on request.
     NotFound: the job has no such figure; Conflict: it cannot be drawn from what the job stored (reason given)."""
     if job.status != "succeeded":
-        raise Conflict(f"job {job.id} is {job.status}: only a succeeded job has figures")
+        raise NotFound(f"job {job.id} has no artifact {name + '.png'!r} (it is {job.status})")
     record = (job.result or {}).get("figures") or {}
     if record.get("mode") != "lazy" or (record.get("names") is not None and name not in record["names"]):
         raise NotFound(f"job {job.id} has no artifact {name + '.png'!r}")
