@@ -58,6 +58,7 @@ class Settings:
     max_jobs_per_key: int | None = None  # jobs of one API key running at once; None: max(1, max_jobs - 1)
     max_queued_jobs_per_key: int = 100  # queued jobs of one API key; more submissions get 429
     ui_session_s: int = 43200  # a web UI session ends this long after sign-in
+    figures: str = "lazy"  # lazy: a job's figures are drawn on first request (app.jobs.figures); eager: at job end
 
     @classmethod
     def from_env(cls, env: dict[str, str] | None = None) -> Settings:
@@ -90,6 +91,7 @@ class Settings:
             max_queued_jobs_per_key=_int_env(env, "ATTITUDE_MAX_QUEUED_JOBS_PER_KEY", 100),
             ui_session_s=_int_env(env, "ATTITUDE_UI_SESSION_S", 43200),
             cors_origins=tuple(o.strip() for o in (env.get("ATTITUDE_CORS_ORIGINS") or "").split(",") if o.strip()),
+            figures=_figures_env(env),
             **_scale_out_env(env),
         )
 
@@ -124,6 +126,15 @@ class Settings:
     @property
     def reference_url(self) -> str:
         return self._data_location("reference")
+
+
+def _figures_env(env: dict[str, str]) -> str:
+    """``ATTITUDE_FIGURES``: lazy (default; figures drawn from the stored artifacts on first request) or eager
+    (drawn and stored by the job)."""
+    mode = (env.get("ATTITUDE_FIGURES") or "lazy").strip().lower()
+    if mode not in ("lazy", "eager"):
+        raise ValueError(f"ATTITUDE_FIGURES must be lazy or eager, got {mode!r}")
+    return mode
 
 
 def _scale_out_env(env: dict[str, str]) -> dict[str, Any]:

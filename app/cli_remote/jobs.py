@@ -116,9 +116,14 @@ def _jobs_artifacts(args: argparse.Namespace) -> int:
         _print(args, [str(p) for p in saved], "\n".join(f"saved {p}" for p in saved))
         return 0
     lines = [f"{'name':40}  {'kind':8}  {'size':>10}  description"]
-    lines += [f"{a['name']:40}  {a['kind']:8}  {_size(a['size_bytes']):>10}  {a['description']}" for a in items]
+    lines += [f"{a['name']:40}  {a['kind']:8}  {_listed_size(a):>10}  {a['description']}" for a in items]
     _print(args, items, "\n".join(lines))
     return 0
+
+
+def _listed_size(a: dict[str, Any]) -> str:
+    """An artifact's size, or "on request" for a figure the service draws when it is first downloaded."""
+    return "on request" if a.get("on_request") or a.get("size_bytes") is None else _size(a["size_bytes"])
 
 
 def _jobs_list(args: argparse.Namespace) -> int:
@@ -164,7 +169,8 @@ def add_jobs_commands(sub: Any, parent: argparse.ArgumentParser) -> None:
     p.add_argument("-o", "--output", help="file (default report_<id>.<format>); its extension sets the format")
     p.add_argument("--format", choices=["html", "pdf", "json"])
     p.set_defaults(func=_jobs_report)
-    p = jobs.add_parser("artifacts", parents=[parent], help="list a job's artifacts, or save them with --download")
+    p = jobs.add_parser("artifacts", parents=[parent], help="list a job's artifacts (figures not drawn yet: 'on "
+                        "request', drawn when downloaded), or save them with --download")
     p.add_argument("id", help="job id or a unique prefix")
     p.add_argument("--kind", choices=["table", "figure", "file", "summary"])
     p.add_argument("--name", action="append", help="only this artifact; repeatable (a table stored as Parquet only: "

@@ -109,6 +109,8 @@ class JobsClient(ClientBase):
         return list((self.result(job_id) or {}).get("warnings", []))
 
     def artifacts(self, job_id: str) -> list[dict[str, Any]]:
+        """The job's artifacts; figures not drawn yet have ``on_request`` true (no size or checksum): downloading
+        one draws and stores it on the service."""
         out: list[dict[str, Any]] = self.get(f"/api/v1/jobs/{self.resolve_job(job_id)}/artifacts")
         return out
 

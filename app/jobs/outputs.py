@@ -4,9 +4,10 @@ Bounded per job (issue 24): a table longer than :data:`CSV_STORED_MAX_ROWS` is s
 made on request from the Parquet (:func:`csv_chunks`, streamed by the artifact download route for the
 ``<table>.csv`` name); a table is stored with at most :data:`TABLE_MAX_ROWS` rows; the artifacts of one job stay
 within :data:`JOB_ARTIFACT_MAX_BYTES` (a table, file or figure that would go beyond is left out). What was
-done is stated in the summary's ``outputs`` and in a note. Figures are drawn once, with every line of more than
-:data:`FIGURE_LINE_MAX_POINTS` points thinned for display first (:func:`thin_lines`: each pixel column's first,
-last, lowest and highest point kept, so the picture is the same and spikes stay).
+done is stated in the summary's ``outputs`` and in a note. Figures (stored here only with
+``ATTITUDE_FIGURES=eager``; by default drawn on first request, app.jobs.figures) are drawn once, with every line
+of more than :data:`FIGURE_LINE_MAX_POINTS` points thinned for display first (:func:`thin_lines`: each pixel
+column's first, last, lowest and highest point kept, so the picture is the same and spikes stay).
 """
 
 from __future__ import annotations
@@ -136,11 +137,9 @@ def write_outputs(store: ArtifactStore, job_id: str, result: TaskResult,
             out.append(store.write(job_id, name, content, kind="file", media_type=media_type,
                                    description=f"file {name}"))
     for name, fig in figures.items():
-        buf = io.BytesIO()
-        thin_lines(fig)
-        fig.savefig(buf, format="png", dpi=110, bbox_inches="tight")
-        if budget.take(f"{name}.png", buf.tell()):
-            out.append(store.write(job_id, f"{name}.png", buf.getvalue(), kind="figure", media_type="image/png",
+        png = figure_png(fig)
+        if budget.take(f"{name}.png", len(png)):
+            out.append(store.write(job_id, f"{name}.png", png, kind="figure", media_type="image/png",
                                    description=str(fig.get_label() or name)))
     outputs = {k: v for k, v in budget.outputs.items() if v}
     if outputs:
@@ -151,6 +150,15 @@ def write_outputs(store: ArtifactStore, job_id: str, result: TaskResult,
     head = store.write(job_id, "summary.json", json.dumps(summary, indent=2).encode(), kind="summary",
                        media_type="application/json", description="job summary")
     return [head, *out]
+
+
+def figure_png(fig: Figure) -> bytes:
+    """A figure as the stored PNG: long lines thinned for display (:func:`thin_lines`), 110 dpi, tight box. The
+    one rendering of the job's figures, at job end (``ATTITUDE_FIGURES=eager``) or on request (app.jobs.figures)."""
+    buf = io.BytesIO()
+    thin_lines(fig)
+    fig.savefig(buf, format="png", dpi=110, bbox_inches="tight")
+    return buf.getvalue()
 
 
 def _write_table(store: ArtifactStore, job_id: str, name: str, columns: dict[str, Any],

@@ -21,6 +21,7 @@ from pydantic import BaseModel, ValidationError
 from sqlalchemy import select
 from sqlalchemy.orm import Session, sessionmaker
 
+from app.jobs.figures import figure_names, table_rows
 from app.jobs.inputs import spacecraft_from_stored
 from app.jobs.outputs import jsonable, write_outputs
 from app.jobs.registry import JobType, registry
@@ -305,16 +306,22 @@ def _execute(job_id: str, settings: Settings, sessions: sessionmaker[Session], a
         progress(0.05, "computing")
         result = job_type.run(inputs, params, progress)
         del inputs
-        progress(0.9, "drawing figures")
-        figures = job_type.figures(result, params)
+        figures: dict[str, Any] = {}
+        if settings.figures == "eager":
+            progress(0.9, "drawing figures")
+            figures = job_type.figures(result, params)
+        # lazy (default): no figure is drawn here; their names, told without drawing, are recorded and each is
+        # drawn from the stored artifacts when first requested (app.jobs.figures, app.services.figures)
+        names = figure_names(job_type.name, result.summary, table_rows(result.tables))
         summary = jsonable({"warnings": [w.as_dict() for w in result.warnings], **result.summary})
         stored = write_outputs(artifacts, job_id, result, figures, summary)
+        figure_record = {"mode": settings.figures, "names": names}
         with sessions.begin() as session:
             jobstore.add_artifacts(session, job_id, stored)
             done = jobstore.set_status(
                 session, job_id, "succeeded", allowed_from=("running",), progress=1.0, stage="done",
                 result={"summary": summary, "inputs": counts, "input_coverage": coverage,
-                        "notes": input_notes + list(result.notes)})
+                        "notes": input_notes + list(result.notes), "figures": figure_record})
             if done and job_type.produces_calibration and summary.get("calibration_complete"):
                 add_version(session, spacecraft_id, job_type.produces_calibration, summary["calibration"], job_id)
             if not done:

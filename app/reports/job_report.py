@@ -1,5 +1,8 @@
 """Job reports: a JSON document, a self-contained HTML page (figures inline) and its PDF.
 
+Figures the job makes on request (``ATTITUDE_FIGURES=lazy``, app.services.figures) are drawn and stored when the
+HTML or PDF report is built, so the report shows every figure as when the job drew them; the JSON lists them.
+
 One report per job, generic over job types: what was processed (spacecraft, sensors, window, sample
 counts, gaps), with which settings (parameters, reference data, configuration and software versions),
 the summary laid out by :mod:`app.reports.summary`, pass/fail against the spacecraft's specification
@@ -30,6 +33,7 @@ from app.reports.inputs import describe_stored_window, retracted_by_job
 from app.reports.pdf import html_to_pdf
 from app.reports.sections import ReportContext, as_cell, contributed_sections
 from app.reports.summary import iso, layout, layouts, split_columns, wall
+from app.services import figures
 from storage.jobs import ArtifactStore
 from storage.models import Calibration, Job, ReferenceDataset, Spacecraft, SpacecraftConfig
 from storage.parquet_store import ParquetStore
@@ -229,10 +233,26 @@ def report_json(job: Job, sc: Spacecraft, job_type: JobType | None, *,
                         "values": list(c.values), "limit": c.limit, "passed": list(c.passed), "ok": c.ok}
                        for c in checks]},
         "reproduce": _reproduce(job, sc, job_type, latest_version, streams),
-        "artifacts": [{"name": a.name, "kind": a.kind, "media_type": a.media_type, "size_bytes": a.size_bytes,
-                       "description": a.description, "url": f"/api/v1/jobs/{job.id}/artifacts/{a.name}"}
-                      for a in job.artifacts],
+        "artifacts": artifact_entries(job),
     }
+
+
+def artifact_entries(job: Job) -> list[dict[str, Any]]:
+    """The report's list of the job's artifacts: the stored ones, then the figures made on request
+    (``on_request``: drawn and stored when first downloaded, or when the HTML/PDF report is built)."""
+    return [{"name": a["name"], "kind": a["kind"], "media_type": a["media_type"], "size_bytes": a["size_bytes"],
+             "description": a["description"], "on_request": a["on_request"],
+             "url": f"/api/v1/jobs/{job.id}/artifacts/{a['name']}"} for a in figures.listing(job)]
+
+
+def with_figures(data: dict[str, Any], job: Job, store: ArtifactStore) -> tuple[dict[str, Any], list[str]]:
+    """Draw and store the figures the job makes on request and has not made yet (a report embeds every figure,
+    as when the job drew them); the report data with its artifact list updated, and what could not be drawn."""
+    session = object_session(job)
+    if session is None or not figures.recorded_names(job):
+        return data, []
+    problems = figures.make_figures(session, store, job)
+    return {**data, "artifacts": artifact_entries(job)}, problems
 
 
 def _png(fig: Any) -> bytes:
@@ -303,6 +323,7 @@ def render_html(data: dict[str, Any], job: Job, store: ArtifactStore, *, ui: boo
                 for_print: bool = False) -> str:
     """The self-contained HTML report. ``ui``: with the web UI's navigation; ``for_print``: for the PDF."""
     job_type = registry().get(job.type)
+    data, figure_problems = with_figures(data, job, store)
     figure_files: dict[str, bytes] = {}
     for a in job.artifacts:
         if a.kind == "figure" and a.media_type == "image/png":
@@ -311,10 +332,11 @@ def render_html(data: dict[str, Any], job: Job, store: ArtifactStore, *, ui: boo
                 figure_files[a.name] = path.read_bytes()
     sections, problems, placed = _sections(data, job, store, job_type, figure_files)
     descriptions = {a.name: a.description for a in job.artifacts}
-    figures = [{"name": name, "title": descriptions.get(name) or name, "data": base64.b64encode(png).decode()}
-               for name, png in figure_files.items() if name not in placed]
+    figure_list = [{"name": name, "title": descriptions.get(name) or name, "data": base64.b64encode(png).decode()}
+                   for name, png in figure_files.items() if name not in placed]
     return _env.get_template("job_report.html").render(
-        d=data, summaries=layouts(data["summary"]), sections=sections, problems=problems, figures=figures,
+        d=data, summaries=layouts(data["summary"]), sections=sections, problems=problems + figure_problems,
+        figures=figure_list,
         tables=_table_info(job, store), ui=ui, for_print=for_print, job_id=job.id)
 
 
@@ -344,7 +366,7 @@ def _facts(data: dict[str, Any]) -> list[tuple[str, str]]:
 def render_pdf(data: dict[str, Any], job: Job, store: ArtifactStore) -> bytes:
     """The report as PDF (Chromium's print of the HTML report; see app.reports.pdf)."""
     html = render_html(data, job, store, for_print=True)
-    figures = [(a.description or a.name, store.path(a).read_bytes()) for a in job.artifacts
-               if a.kind == "figure" and a.media_type == "image/png" and store.path(a).is_file()]
-    pdf, _engine = html_to_pdf(html, f"{data['job']['title']} — {data['spacecraft']}", _facts(data), figures)
+    pngs = [(a.description or a.name, store.path(a).read_bytes()) for a in job.artifacts
+            if a.kind == "figure" and a.media_type == "image/png" and store.path(a).is_file()]
+    pdf, _engine = html_to_pdf(html, f"{data['job']['title']} — {data['spacecraft']}", _facts(data), pngs)
     return pdf

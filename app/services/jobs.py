@@ -18,6 +18,7 @@ from app.jobs.runner import CALIBRATION_PREFIX, SCREENING_KEY, stream_names
 from app.reports.inputs import retracted_by_job
 from app.reports.job_report import brief, report_json
 from app.reports.specs import parse as parse_specs
+from app.services import figures
 from app.services.access import Principal
 from app.services.bounds import check_json_shape
 from app.services.downloads import StoredFile
@@ -288,9 +289,12 @@ def artifacts(session: Session, job_id: str, who: Principal) -> list[Artifact]:
 def artifact_file(session: Session, settings: Settings, job_id: str, name: str, who: Principal) -> StoredFile:
     """The stored file of artifact ``name`` of the job; NotFound, or Gone when it is missing from the store.
     ``<table>.csv`` of a table stored as Parquet only (app.jobs.outputs) gives that Parquet file with
-    ``csv_from_parquet`` set: the caller converts it (app.jobs.outputs.csv_chunks)."""
-    get_job(session, job_id, who)
+    ``csv_from_parquet`` set: the caller converts it (app.jobs.outputs.csv_chunks). ``<figure>.png`` of a figure
+    made on request is drawn and stored first (app.services.figures.figure_artifact)."""
+    job, _sc = get_job(session, job_id, who)
     art = session.scalar(select(Artifact).where(Artifact.job_id == job_id, Artifact.name == name))
+    if art is None and name.endswith(".png"):  # a figure made on request (app.services.figures)
+        art = figures.figure_artifact(session, artifact_store(settings), job, name[: -len(".png")])
     on_request = False
     if art is None and name.endswith(".csv"):  # a long table is stored as Parquet only: its CSV on request
         art = session.scalar(select(Artifact).where(Artifact.job_id == job_id, Artifact.kind == "table",

@@ -7,12 +7,13 @@ from typing import Annotated, Any, Literal, cast
 
 from fastapi import APIRouter, Query, Request, Response, status
 from fastapi.responses import FileResponse, HTMLResponse, JSONResponse, StreamingResponse
-from pydantic import BaseModel
+from pydantic import BaseModel, Field
 
 from app.api.deps import Operator, SessionDep, SettingsDep, StoreDep, Viewer
 from app.api.pagination import MAX_LIMIT, announce_next
 from app.jobs.outputs import csv_chunks
 from app.reports.job_report import render_html, render_pdf
+from app.services import figures
 from app.services import jobs as service
 from app.services.downloads import StoredFile
 from app.services.jobs import JobCreate
@@ -114,18 +115,21 @@ class ArtifactOut(BaseModel):
     name: str
     kind: ArtifactKind
     media_type: str
-    size_bytes: int
-    checksum_sha256: str
+    size_bytes: int | None = Field(description="null for a figure made on request that is not drawn yet")
+    checksum_sha256: str | None = Field(description="null for a figure made on request that is not drawn yet")
     description: str
     url: str
+    on_request: bool = Field(False, description=(
+        "a figure the job did not draw (ATTITUDE_FIGURES=lazy): GET its url draws it from the stored results, "
+        "stores it and serves it; later requests serve the stored PNG"))
 
 
 @router.get("/{job_id}/artifacts", response_model=list[ArtifactOut])
 def list_artifacts(job_id: str, session: SessionDep, who: Viewer) -> list[ArtifactOut]:
-    return [ArtifactOut(name=a.name, kind=cast(ArtifactKind, a.kind), media_type=a.media_type, size_bytes=a.size_bytes,
-                        checksum_sha256=a.checksum_sha256, description=a.description,
-                        url=f"/api/v1/jobs/{job_id}/artifacts/{a.name}")
-            for a in service.artifacts(session, job_id, who)]
+    """The job's stored artifacts, then the figures it makes on request (``on_request``)."""
+    job, _sc = service.get_job(session, job_id, who)
+    return [ArtifactOut(**{**a, "kind": cast(ArtifactKind, a["kind"])},
+                        url=f"/api/v1/jobs/{job_id}/artifacts/{a['name']}") for a in figures.listing(job)]
 
 
 def artifact_response(f: StoredFile, headers: dict[str, str] | None = None) -> Response:
