@@ -57,9 +57,11 @@ def honest_covariance(
     s_after = np.concatenate([s_rev[1:], np.zeros((1, p, 3))], axis=0)  # sum_{m > n} F_m
     inner = np.cumsum(f @ gamma, axis=0) + s_after @ gamma  # (M, P, 3)
     jc = ev.jac @ c_inv  # (M, 3, P)
-    hl = np.einsum("nip,npk,njk->nij", jc, inner, k_mat)
-    hlh = np.einsum("nip,pq,njq->nij", jc, b_rw, jc)
-    rw_ms = diag_l - 2.0 * np.einsum("nii->ni", hl) + np.einsum("nii->ni", hlh)
+    # only the diagonals of H L = jc inner K^T and H L H^T = jc B jc^T enter (the same sums as the full
+    # (M, 3, 3) products would form for them, without the 6 off-diagonal terms per sample)
+    hl_diag = np.einsum("nip,npk,nik->ni", jc, inner, k_mat)
+    hlh_diag = np.einsum("nip,pq,niq->ni", jc, b_rw, jc)
+    rw_ms = diag_l - 2.0 * hl_diag + hlh_diag
 
     counts = np.maximum(np.bincount(sensor, minlength=n_sensors), 1).astype(float)
     ms = np.zeros((n_sensors, 3))

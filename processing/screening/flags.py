@@ -67,8 +67,9 @@ def accepted_mask(flags: Mapping[str, ArrayLike], stream: str, cols: Columns) ->
     n = len(cols["time_tai_ns"])
     if not np.any(sel):
         return np.ones(n, dtype=bool)
-    bad = pd.MultiIndex.from_arrays([np.asarray(flags["sensor"]).astype(str)[sel],
-                                     np.asarray(flags["key"]).astype(str)[sel],
+    # the rejected rows picked before their strings are converted (not the whole table's column)
+    bad = pd.MultiIndex.from_arrays([np.asarray(flags["sensor"])[sel].astype(str),
+                                     np.asarray(flags["key"])[sel].astype(str),
                                      np.asarray(flags["time_tai_ns"], dtype=np.int64)[sel]])
     rows = pd.MultiIndex.from_arrays([np.asarray(cols["sensor"]).astype(str), sample_keys(stream, cols).astype(str),
                                       np.asarray(cols["time_tai_ns"], dtype=np.int64)])

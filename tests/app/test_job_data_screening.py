@@ -11,7 +11,7 @@ from matplotlib.figure import Figure
 from pydantic import ValidationError
 
 from app.jobs.outputs import jsonable
-from app.jobs.types.data_screening import JOB, Params
+from app.jobs.types.data_screening import JOB, Params, _rejected_by
 from processing.formats.rinex_nav import parse_rinex_nav_reference
 from processing.screening.flags import filter_streams
 from processing.simulate.seed002 import simulate_seed002
@@ -97,3 +97,16 @@ def test_only_the_chosen_streams_and_what_their_criteria_need_are_read() -> None
     assert stream_names(JOB, Params()) == stream_names(JOB)
     assert set(stream_names(JOB, Params(streams=["magnetometer"]))) == {"magnetometer", "gnss"}
     assert set(stream_names(JOB, Params(streams=["star_tracker"]))) == {"star_tracker", "gyro", "gnss"}
+
+
+def test_rejected_by_names_whole_criteria_only():
+    """_rejected_by matches whole ';'-joined names (not prefixes), and rows without a reason never match:
+    the same rows as searching ';' + reasons + ';' over every row."""
+    reasons = np.array(["", "energy", "energy_x;spike", "spike;energy", "velocity", "", "stuck;energy;spike"],
+                       dtype=object)
+    assert _rejected_by(reasons, "energy").tolist() == [False, True, False, True, False, False, True]
+    assert _rejected_by(reasons, "spike").tolist() == [False, False, True, True, False, False, True]
+    assert _rejected_by(reasons, "energy_x").tolist() == [False, False, True, False, False, False, False]
+    assert not _rejected_by(reasons[:0], "energy").size
+    everywhere = np.char.find(np.char.add(np.char.add(";", reasons.astype(str)), ";"), ";velocity;") >= 0
+    assert np.array_equal(_rejected_by(reasons, "velocity"), everywhere)

@@ -173,8 +173,15 @@ def _warnings(findings: dict[str, Any]) -> list[ResultWarning]:
 
 
 def _rejected_by(reasons: np.ndarray, criterion: str) -> np.ndarray:
-    """Rows whose ';'-joined reasons name ``criterion``."""
-    return np.char.find(np.char.add(np.char.add(";", reasons.astype(str)), ";"), f";{criterion};") >= 0
+    """Rows whose ';'-joined reasons name ``criterion``.
+
+    Only the rows with a reason are searched (an empty one names no criterion): the string operations run on
+    the rejected samples, not on every row of the flags table."""
+    text = reasons.astype(str, copy=False)
+    out = np.zeros(text.shape, dtype=bool)
+    named = np.flatnonzero(text != "")
+    out[named] = np.char.find(np.char.add(np.char.add(";", text[named]), ";"), f";{criterion};") >= 0
+    return out
 
 
 def _timeline(result: TaskResult, t0: int) -> Figure:
