@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING, Any, TypeVar
 import numpy as np
 import pyarrow as pa
 
+from app.jobs.outputs import table_columns
 from processing.tasks import TaskResult
 
 if TYPE_CHECKING:
@@ -83,16 +84,7 @@ def columns_from_arrow(table: pa.Table) -> dict[str, np.ndarray]:
     names = table.column_names
     if "time_tai_ns" in names and names[0] == "time" and pa.types.is_string(table.schema.field("time").type):
         table = table.drop_columns(["time"])  # added by table_to_arrow for display, not a column of the job
-    out: dict[str, np.ndarray] = {}
-    for c in table.column_names:
-        col = table.column(c)
-        if col.null_count == 0 and (pa.types.is_string(col.type) or pa.types.is_large_string(col.type)):
-            encoded = col.combine_chunks().dictionary_encode()
-            values = np.array(encoded.dictionary.to_pylist(), dtype=object)
-            out[c] = values[encoded.indices.to_numpy(zero_copy_only=False)]
-        else:
-            out[c] = col.to_numpy(zero_copy_only=False)
-    return out
+    return table_columns(table)
 
 
 V = TypeVar("V")

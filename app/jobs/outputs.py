@@ -111,6 +111,22 @@ class _Budget:
         return True
 
 
+def table_columns(table: pa.Table) -> dict[str, np.ndarray]:
+    """A stored table's columns as numpy arrays (a window's telemetry, a job's result table); text columns (the
+    sensor names) as object arrays holding one str per distinct value, not one per row (a day of 10 Hz gyro:
+    8 bytes a row instead of ~60)."""
+    out: dict[str, np.ndarray] = {}
+    for c in table.column_names:
+        col = table.column(c)
+        if col.null_count == 0 and (pa.types.is_string(col.type) or pa.types.is_large_string(col.type)):
+            encoded = col.combine_chunks().dictionary_encode()
+            values = np.array(encoded.dictionary.to_pylist(), dtype=object)
+            out[c] = values[encoded.indices.to_numpy(zero_copy_only=False)]
+        else:
+            out[c] = col.to_numpy(zero_copy_only=False)
+    return out
+
+
 def iso_column(tai_ns: NDArray[np.int64]) -> pa.Array:
     """ISO UTC times as an Arrow string column, built from the character codes without a Python string per
     value (the same column as ``pa.array(timescales.tai_ns_to_iso(tai_ns))``)."""

@@ -15,7 +15,6 @@ import traceback
 from typing import Any
 
 import numpy as np
-import pyarrow as pa
 import pyarrow.parquet as pq
 from pydantic import BaseModel, ValidationError
 from sqlalchemy import select
@@ -23,7 +22,7 @@ from sqlalchemy.orm import Session, sessionmaker
 
 from app.jobs.figures import figure_names, table_rows
 from app.jobs.inputs import spacecraft_from_stored
-from app.jobs.outputs import jsonable, write_outputs
+from app.jobs.outputs import jsonable, table_columns, write_outputs
 from app.jobs.registry import JobType, registry
 from app.reports.inputs import describe_inputs
 from app.settings import Settings
@@ -76,21 +75,6 @@ def stream_names(job_type: JobType, params: BaseModel | None = None) -> tuple[st
         return names
     used = set(job_type.input_streams(params)) | set(job_type.streams)
     return tuple(n for n in names if n in used)
-
-
-def table_columns(table: pa.Table) -> dict[str, np.ndarray]:
-    """A stored window's columns as numpy arrays; text columns (the sensor names) as object arrays holding one
-    str per distinct value, not one per row (a day of 10 Hz gyro: 8 bytes a row instead of ~60)."""
-    out: dict[str, np.ndarray] = {}
-    for c in table.column_names:
-        col = table.column(c)
-        if col.null_count == 0 and (pa.types.is_string(col.type) or pa.types.is_large_string(col.type)):
-            encoded = col.combine_chunks().dictionary_encode()
-            values = np.array(encoded.dictionary.to_pylist(), dtype=object)
-            out[c] = values[encoded.indices.to_numpy(zero_copy_only=False)]
-        else:
-            out[c] = col.to_numpy(zero_copy_only=False)
-    return out
 
 
 def load_inputs(session: Session, settings: Settings, job: Job, job_type: JobType,

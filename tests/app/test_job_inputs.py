@@ -11,7 +11,7 @@ import pytest
 from pydantic import BaseModel, ConfigDict
 
 from app.config_schema import SpacecraftConfig
-from app.jobs import runner
+from app.jobs import outputs, runner
 from app.jobs.inputs import spacecraft_from_config, spacecraft_from_stored
 from app.jobs.registry import JobType
 from processing.spacecraft import Spacecraft
@@ -196,10 +196,10 @@ def test_stored_columns_become_the_same_arrays_with_one_str_per_sensor() -> None
     chunks = [pa.table({"time_tai_ns": pa.array(t, pa.int64()), "sensor": pa.array(s), "wx": pa.array(w)})
               for t, s, w in (([1, 2, 3], ["g1", "g2", "g1"], [0.5, 1.5, 2.5]), ([4], ["g2"], [3.5]))]
     table = pa.concat_tables(chunks)
-    cols = runner.table_columns(table)
+    cols = outputs.table_columns(table)
     assert cols["sensor"].dtype == object and cols["sensor"].tolist() == ["g1", "g2", "g1", "g2"]
     assert all(type(x) is str for x in cols["sensor"]) and cols["sensor"][0] is cols["sensor"][2]
     np.testing.assert_array_equal(cols["time_tai_ns"], [1, 2, 3, 4])
     np.testing.assert_array_equal(cols["wx"], [0.5, 1.5, 2.5, 3.5])
-    one = runner.table_columns(pa.table({"sensor": pa.array(["st1"] * 3)}))["sensor"]
+    one = outputs.table_columns(pa.table({"sensor": pa.array(["st1"] * 3)}))["sensor"]
     assert one.shape == (3,) and one.tolist() == ["st1"] * 3
