@@ -113,6 +113,22 @@ def assign(job_types: Iterable[JobType], worlds: dict[str, Any]) -> tuple[dict[s
 WORLD_ADMIN = "report-world-admin-token-0123456789"
 
 
+def run_in_process(jt: JobType, sim: Any) -> tuple[Any, Any]:
+    """(TaskResult, params) of the job type run directly, with default params, on the simulated streams it reads."""
+    from app.jobs.runner import stream_names
+    from processing.spacecraft import Spacecraft
+    from processing.tasks import TaskInputs, no_progress
+
+    names = stream_names(jt)
+    streams = {k: v for k, v in sim.streams.items() if k in names}
+    times = [np.asarray(v["time_tai_ns"], dtype=np.int64) for v in streams.values()] or [np.array([0])]
+    inputs = TaskInputs(streams=streams, spacecraft=Spacecraft.from_json(config_with_specs(sim.config)),
+                        start_tai_ns=int(min(t.min() for t in times)), end_tai_ns=int(max(t.max() for t in times)),
+                        reference={})
+    params = jt.params.model_validate({})
+    return jt.run(inputs, params, no_progress), params
+
+
 def _build_world(data_dir: Path) -> dict[str, dict[str, Any]]:
     """Upload every scenario into a service on ``data_dir`` (SQLite catalog inside it) and run every job type
     once on its spacecraft; returns {job type: the finished job as the API shows it}."""

@@ -20,7 +20,6 @@ from sqlalchemy import delete, select
 from app.jobs import figures as lazy
 from app.jobs.outputs import figure_png, jsonable, write_outputs
 from app.jobs.registry import registry
-from app.jobs.runner import stream_names
 from app.main import create_app
 from app.services import figures as figure_service
 from app.settings import Settings
@@ -188,9 +187,7 @@ def test_figures_setting_from_the_environment(tmp_path):
 
 def _in_process(job_type: str):
     """(job type, TaskResult, params) of ``job_type`` run on the report world's simulated streams (a small job)."""
-    from processing.spacecraft import Spacecraft
-    from processing.tasks import TaskInputs, no_progress
-    from tests.app.report_world import assign, config_with_specs, scenarios
+    from tests.app.report_world import assign, run_in_process, scenarios
 
     worlds = _worlds(scenarios)
     where, skipped = assign(registry().values(), worlds)
@@ -198,14 +195,7 @@ def _in_process(job_type: str):
         pytest.skip(skipped[job_type])
     jt = registry()[job_type]
     sim = worlds[where[job_type]]
-    names = stream_names(jt)
-    streams = {k: v for k, v in sim.streams.items() if k in names}
-    times = [np.asarray(v["time_tai_ns"], dtype=np.int64) for v in streams.values()] or [np.array([0])]
-    inputs = TaskInputs(streams=streams, spacecraft=Spacecraft.from_json(config_with_specs(sim.config)),
-                        start_tai_ns=int(min(t.min() for t in times)), end_tai_ns=int(max(t.max() for t in times)),
-                        reference={})
-    params = jt.params.model_validate({})
-    return jt, jt.run(inputs, params, no_progress), params
+    return (jt, *run_in_process(jt, sim))
 
 
 _WORLDS: dict = {}

@@ -31,7 +31,6 @@ from tests.app.figure_geometry import problems as figure_problems
 from tests.app.report_world import (
     SPECIFICATIONS,
     all_type_names,
-    config_with_specs,
     missing_tools,
     output_dir,
     png_ink_fraction,
@@ -383,21 +382,13 @@ def test_input_description_counts_gaps_per_sensor():
 
 def _run_in_process(world, job_type: str):
     """(TaskResult, params) of ``job_type`` run directly on the simulated streams of its spacecraft."""
-    from processing.spacecraft import Spacecraft
-    from processing.tasks import TaskInputs, no_progress
+    from tests.app.report_world import run_in_process
 
     if job_type in world.skipped:
         pytest.skip(world.skipped[job_type])
     jt = registry()[job_type]
     sim = world.worlds[world.where[job_type]]
-    names = stream_names(jt)
-    streams = {k: v for k, v in sim.streams.items() if k in names}
-    times = [np.asarray(v["time_tai_ns"], dtype=np.int64) for v in streams.values()] or [np.array([0])]
-    inputs = TaskInputs(streams=streams, spacecraft=Spacecraft.from_json(config_with_specs(sim.config)),
-                        start_tai_ns=int(min(t.min() for t in times)), end_tai_ns=int(max(t.max() for t in times)),
-                        reference={})
-    params = jt.params.model_validate({})
-    return jt.run(inputs, params, no_progress), params
+    return run_in_process(jt, sim)
 
 
 @pytest.mark.parametrize("job_type", all_type_names())

@@ -124,8 +124,13 @@ def _fig_spectra(result: TaskResult) -> Figure:
             ax.grid(alpha=0.3)
         for line in s["spectral_lines"]:
             if line["source"] == "gyro" and line["axis"] == f"y{i + 1}" and line["freq_hz"] <= 0.5:
-                full.annotate(f"{line['freq_hz']:.3f} Hz\n{line['amplitude_arcsec_s']:.2f}\"/s",
-                              (line["freq_hz"], line["amplitude_arcsec_s"]), fontsize=7)
+                # the fitted amplitude can stand above the sampled spectrum (a line between two grid
+                # frequencies): the frame grows to keep the mark and its label inside
+                amplitude = line["amplitude_arcsec_s"]
+                full.plot([line["freq_hz"]], [amplitude], marker="v", ms=4, color="tab:red", ls="none")
+                full.set_ylim(top=max(full.get_ylim()[1], 1.3 * amplitude))
+                full.annotate(f"{line['freq_hz']:.3f} Hz\n{amplitude:.2f}\"/s", (line["freq_hz"], amplitude),
+                              fontsize=7)
     axes[0, 0].set_title("0 - 0.5 Hz")
     axes[0, 1].set_title(f"0 - {zoom:.3f} Hz (dotted: smoother cutoff)")
     axes[0, 1].legend(fontsize=8)
