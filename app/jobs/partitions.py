@@ -81,6 +81,13 @@ def _dask_client_available() -> bool:
     return True
 
 
+def _cluster_threads() -> int:
+    """Worker threads of the cluster this task runs on."""
+    from distributed import get_client
+
+    return sum(get_client().nthreads().values())
+
+
 BATCHES_PER_THREAD = 2
 """On Dask, the parts go in this many tasks per worker thread (consecutive runs of parts; some slack for
 uneven parts)."""
@@ -138,7 +145,8 @@ def map_concurrent(func: Callable[[T, Progress], R], parts: Sequence[T], progres
                    poll: Callable[[list[int]], None] = lambda finished: None) -> list[R]:
     """``[func(p, progress) for p, progress in zip(parts, progresses)]``, every part at the same time.
 
-    Here: a thread per part, each given its own progress callback. On a Dask worker: a task per part on the
+    Here: a thread per part, each given its own progress callback. On a Dask cluster of one worker thread: in
+    order, in this task (side by side would only take turns, and move the data). On a larger one: a task per part on the
     same cluster (each part and its data on a worker of its own while there are workers), each given
     :func:`no_progress`, since a callback that writes to the job's database does not travel: the calling
     thread reports for them instead, ``progress(0.0, "running on a Dask worker")`` at the start and
@@ -155,6 +163,10 @@ def map_concurrent(func: Callable[[T, Progress], R], parts: Sequence[T], progres
         return []
     if len(parts) == 1:
         return [func(parts[0], progresses[0])]
+    if _dask_client_available() and _cluster_threads() < 2:
+        # one worker thread: the tasks would only take turns with this one, and pay for moving the parts
+        # (measured: a spacecraft-day's reconstruction 25-28 s side by side against 16-20 s in order)
+        return [func(p, progress) for p, progress in zip(parts, progresses, strict=True)]
     if _dask_client_available():
         from distributed import wait as dask_wait
         from distributed import worker_client

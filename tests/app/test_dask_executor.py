@@ -243,6 +243,18 @@ def test_concurrent_branches_run_on_two_workers(cluster):
     assert polls[-1] == [0, 1] and len(polls) >= 2
 
 
+def test_concurrent_branches_on_a_single_thread_cluster_run_in_order_in_the_task():
+    """One worker thread: the parts run one after the other inside the job's task, with their own progress."""
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=":0",
+                                  memory_limit=0, silence_logs=50) as c, \
+            distributed.Client(c, set_as_default=False) as client:
+        out, polls, reports = client.submit(_two_branches, 0.2, pure=False).result(timeout=60)
+    assert [name for name, _, _ in out] == ["a", "b"]
+    (a0, a1), (b0, b1) = (span for _, _, span in out)
+    assert a1 <= b0, "the parts overlapped on one worker thread"
+    assert reports == [] and polls == []  # no Dask tasks to report for: the parts ran here
+
+
 def test_time_partitions_cover_the_window_once():
     parts = time_partitions(0, 10 * 10**9, 3.0)
     assert parts == [(0, 3 * 10**9), (3 * 10**9, 6 * 10**9), (6 * 10**9, 9 * 10**9), (9 * 10**9, 10 * 10**9 + 1)]
