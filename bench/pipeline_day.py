@@ -108,6 +108,7 @@ def main() -> None:
     ap.add_argument("--top", type=int, default=10)
     ap.add_argument("--no-profile", action="store_true", help="time without cProfile's overhead (no top list)")
     ap.add_argument("--profile-out", type=Path, help="also dump the job's cProfile stats to this file (pstats)")
+    ap.add_argument("--serial", action="store_true", help="the stages one after the other (parallel_stages=false)")
     a = ap.parse_args()
     start = int(timescales.iso_to_tai_ns(["2023-06-01T00:00:00Z"])[0])
     t0 = time.perf_counter()
@@ -127,7 +128,8 @@ def main() -> None:
         sessions = session_factory(engine)
         with sessions() as session:
             who = Principal(key_id="bench", name="bench", role="admin")
-            body = job_service.JobCreate.model_validate({"type": "reconstruction", "spacecraft": "sat000"})
+            body = job_service.JobCreate.model_validate({"type": "reconstruction", "spacecraft": "sat000",
+                                                         "params": {"parallel_stages": not a.serial}})
             job = job_service.submit(session, body, who, on_submit=lambda: None)
             job_id = job.id
         with sessions.begin() as session:
