@@ -110,12 +110,6 @@ class DaskExecutor(CatalogDispatcher[_InFlight]):
             if not self.settings.dask_address:
                 raise ValueError("the Dask executor needs ATTITUDE_DASK_ADDRESS")
             self._client = Client(self.settings.dask_address, set_as_default=False, timeout="30s")
-        try:
-            from app.jobs.dask_warmup import WarmUp
-
-            self._client.register_plugin(WarmUp(), name=WarmUp.name)
-        except Exception:  # noqa: BLE001 - a worker without this package fails its jobs with the reason anyway
-            log.warning("could not warm the Dask workers up (import of the job types)", exc_info=True)
 
     def _disconnect(self) -> None:
         if self._own_client and self._client is not None:

@@ -88,8 +88,6 @@ def test_same_results_on_local_and_dask_executors(settings, cluster):
         on_local = _run_all(local, jobs)
     with open_client(dask_settings(settings, cluster)) as remote:
         on_dask = _run_all(remote, jobs)
-        # the executor warmed the workers up when it connected (the job types imported before a job)
-        assert all(cluster[1].run(lambda dask_worker: "attitude-warm-up" in dask_worker.plugins).values())
         for job_l, job_d in zip(on_local, on_dask, strict=True):
             assert job_l["status"] == job_d["status"] == "succeeded", (job_l["error"], job_d["error"])
             result_l, result_d = dict(job_l["result"]), dict(job_d["result"])
