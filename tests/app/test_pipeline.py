@@ -13,7 +13,7 @@ from pydantic import BaseModel, ConfigDict
 
 from app.jobs import registry as registry_module
 from app.jobs.registry import JobType
-from app.jobs.types import reconstruction
+from app.jobs.types import reconstruction, reconstruction_flow
 from processing.attitude import rotations
 from processing.simulate.seed003 import simulate_seed003
 from processing.spacecraft import Spacecraft
@@ -238,7 +238,7 @@ def test_in_sorted_is_isin():
     for _ in range(30):
         x = rng.integers(0, 500, size=rng.integers(0, 200))
         values = np.sort(rng.integers(0, 500, size=rng.integers(0, 200)))
-        np.testing.assert_array_equal(reconstruction._in_sorted(x, values), np.isin(x, values))
+        np.testing.assert_array_equal(reconstruction_flow._in_sorted(x, values), np.isin(x, values))
 
 
 def _tables_equal(a, b):
