@@ -2,10 +2,12 @@
 LocalCluster of 2 single-threaded worker processes, in the same run.
 
 The job types that split their work with ``app.jobs.partitions.map_partitions`` (star_tracker_accuracy: the
-per-segment smoothings; data_screening: the streams after GNSS) run on ``--hours`` of the paper-003 scenario at
+per-segment smoothings; data_screening: the streams after GNSS), and the ``reconstruction`` pipeline that runs
+both (its branches side by side: ``map_concurrent``), run on ``--hours`` of the paper-003 scenario at
 the constellation benchmark's rates (10 Hz gyro, 1 Hz star tracker, 1 Hz GNSS):
 
-- ``serial``: the job's ``run`` here, its parts one after the other (map_partitions with one worker);
+- ``serial``: the job's ``run`` here, its parts one after the other (map_partitions with one worker; for
+  ``reconstruction`` also its stages, ``parallel_stages=false``);
 - ``local``: the job's ``run`` here, as in a local worker process (map_partitions: a thread pool);
 - ``dask``: the job's ``run`` as a task on one worker of the cluster (as the Dask executor submits it), its
   parts submitted from there to every worker (map_partitions: ``worker_client``).
@@ -26,32 +28,47 @@ import time
 from functools import partial
 from typing import Any
 
-PARAMS: dict[str, dict[str, Any]] = {"star_tracker_accuracy": {}, "data_screening": {}}
+PARAMS: dict[str, dict[str, Any]] = {"star_tracker_accuracy": {}, "data_screening": {}, "reconstruction": {}}
+
+
+SPLITTING = ("app.jobs.types.data_screening", "app.jobs.types.star_tracker_accuracy")
+"""The job-type modules that call map_partitions (``serial`` runs their parts in order)."""
 
 
 def run_job_type(name: str, inputs: Any, params: dict[str, Any], max_workers: int | None = None) -> dict[str, Any]:
-    """The job type's run (on whichever process calls it); returns its summary."""
+    """The job type's run (on whichever process calls it, with the allocator set as the Dask executor's task
+    sets it: app.jobs.allocator); returns its summary. ``max_workers=1``: every map_partitions in order, and a
+    pipeline's stages one after the other."""
+    import importlib
+
     import matplotlib
 
     matplotlib.use("Agg")
     from app.jobs import partitions
+    from app.jobs.allocator import reuse_large_blocks
     from app.jobs.registry import registry
     from processing.tasks import no_progress
 
+    if partitions._dask_client_available():
+        reuse_large_blocks()
     jt = registry()[name]
-    if max_workers == 1:
-        real = partitions.map_partitions
+    if max_workers != 1:
+        return dict(jt.run(inputs, jt.params.model_validate(params), no_progress).summary)
+    real = partitions.map_partitions
 
-        def serial(func: Any, parts: Any, **kw: Any) -> Any:
-            return real(func, parts, max_workers=1, **kw)
+    def serial(func: Any, parts: Any, **kw: Any) -> Any:
+        return real(func, parts, **{**kw, "max_workers": 1})
 
-        module = __import__(jt.run.__module__, fromlist=["map_partitions"])
+    modules = [importlib.import_module(m) for m in SPLITTING]
+    for module in modules:
         module.map_partitions = serial  # type: ignore[attr-defined]
-        try:
-            return dict(jt.run(inputs, jt.params.model_validate(params), no_progress).summary)
-        finally:
+    try:
+        if name == "reconstruction":
+            params = {**params, "parallel_stages": False}
+        return dict(jt.run(inputs, jt.params.model_validate(params), no_progress).summary)
+    finally:
+        for module in modules:
             module.map_partitions = real  # type: ignore[attr-defined]
-    return dict(jt.run(inputs, jt.params.model_validate(params), no_progress).summary)
 
 
 def _close(a: Any, b: Any, rel: float = 1e-12) -> bool:

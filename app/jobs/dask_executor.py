@@ -60,9 +60,13 @@ def make_executor(settings: Settings, sessions: sessionmaker[Session]) -> Execut
 
 
 def run_job(job_id: str, settings: Settings) -> str:
-    """The task a Dask worker runs: the same runner as the local worker processes."""
+    """The task a Dask worker runs: the same runner as the local worker processes (with the allocator set as
+    app.jobs.allocator explains)."""
     import matplotlib
 
+    from app.jobs.allocator import reuse_large_blocks
+
+    reuse_large_blocks()
     matplotlib.use("Agg")
     from app.jobs import runner
 

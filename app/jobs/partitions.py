@@ -22,6 +22,7 @@ job's own thread watching for cancellation while they run.
 from __future__ import annotations
 
 import os
+import sys
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 from typing import Any, TypeVar
@@ -29,6 +30,7 @@ from typing import Any, TypeVar
 import numpy as np
 from numpy.typing import NDArray
 
+from app.jobs.allocator import reuse_large_blocks
 from processing.tasks import Progress, no_progress
 from processing.units import NS_PER_S
 
@@ -70,6 +72,8 @@ def split_columns(columns: Mapping[str, NDArray[Any]], parts: Sequence[tuple[int
 
 
 def _dask_client_available() -> bool:
+    if "distributed" not in sys.modules:
+        return False  # no Dask worker runs this (a worker has it imported); importing it costs ~1.7 s of CPU
     try:
         from distributed import get_worker
     except ImportError:
@@ -100,7 +104,13 @@ def _batches(parts: list[T], k: int) -> list[list[T]]:
 
 
 def _run_batch(func: Callable[[T], R], batch: Sequence[T]) -> list[R]:
+    reuse_large_blocks()
     return [func(p) for p in batch]
+
+
+def _run_part(func: Callable[[T, Progress], R], part: T, progress: Progress) -> R:
+    reuse_large_blocks()
+    return func(part, progress)
 
 
 def map_partitions(func: Callable[[T], R], parts: Sequence[T], *, progress: Progress = no_progress,
@@ -179,7 +189,7 @@ def map_concurrent(func: Callable[[T, Progress], R], parts: Sequence[T], progres
             for i, part in enumerate(parts):
                 where = [workers[i % len(workers)]] if workers else None
                 data = client.scatter([part], workers=where, hash=False)[0]  # a list: a dict part is no mapping
-                futures.append(client.submit(func, data, no_progress, pure=False, workers=where,
+                futures.append(client.submit(_run_part, func, data, no_progress, pure=False, workers=where,
                                              allow_other_workers=True))
             reported: set[int] = set()
             try:
