@@ -26,8 +26,18 @@ GAP_FACTOR = 1.5
 MAX_LISTED_GAPS = 20
 
 
+def _distinct_times(t: NDArray[np.int64]) -> NDArray[np.int64]:
+    """``np.unique(t)``; in one pass when ``t`` is already in order (as the telemetry store reads it)."""
+    if t.size < 2:
+        return t
+    step = np.diff(t)
+    if np.all(step >= 0):
+        return t[np.concatenate(([True], step != 0))]
+    return np.unique(t)
+
+
 def _describe_series(t: NDArray[np.int64], n_rows: int, start_tai_ns: int, end_tai_ns: int) -> dict[str, Any]:
-    t = np.unique(np.asarray(t, dtype=np.int64))  # rows sharing a time (panels, satellites) count once
+    t = _distinct_times(np.asarray(t, dtype=np.int64))  # rows sharing a time (panels, satellites) count once
     entry: dict[str, Any] = {"n_samples": int(n_rows), "first_tai_ns": int(t[0]), "last_tai_ns": int(t[-1]),
                              "period_s": None, "n_gaps": 0, "gap_total_s": 0.0, "missing_samples": 0,
                              "largest_gaps": [],

@@ -378,6 +378,20 @@ def test_input_description_counts_gaps_per_sensor():
     assert a["trailing_s"] == 4.0 and b["n_gaps"] == 0 and b["period_s"] == 10.0
 
 
+@pytest.mark.parametrize("order", ["sorted", "shuffled"])
+def test_input_description_counts_shared_times_once_in_any_order(order):
+    from app.reports.inputs import describe_inputs
+
+    rng = np.random.default_rng(3)
+    t = np.repeat(np.array([0, 1, 2, 2, 4, 5], dtype=np.int64) * 10**9, 3)  # three panels per time, one duplicate
+    if order == "shuffled":
+        t = rng.permutation(t)
+    out = describe_inputs({"panels": {"time_tai_ns": t, "sensor": np.array(["p"] * t.size, dtype=object)}},
+                          0, 5 * 10**9)["panels"]["p"]
+    assert (out["n_samples"], out["period_s"], out["n_gaps"], out["missing_samples"]) == (18, 1.0, 1, 1)
+    assert (out["first_tai_ns"], out["last_tai_ns"]) == (0, 5 * 10**9)
+
+
 # --- figures: drawn in-process on the same simulated data, their geometry checked --------------------
 
 def _run_in_process(world, job_type: str):
