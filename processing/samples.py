@@ -15,10 +15,24 @@ from dataclasses import dataclass, fields
 from typing import Any, ClassVar, TypeVar
 
 import numpy as np
-from numpy.typing import NDArray
+import pandas as pd
+from numpy.typing import ArrayLike, NDArray
 
 Columns = Mapping[str, NDArray[Any]]
 S = TypeVar("S", bound="Samples")
+
+
+def sensor_index(values: ArrayLike) -> tuple[list[str], NDArray[np.intp]]:
+    """The distinct names in a ``sensor`` column, sorted, and each row's position among them.
+
+    One hash pass over the column (``pandas.factorize``) instead of converting every row to a numpy string:
+    a day of 10 Hz gyro rows took ~0.1 s per conversion, and several steps of a job did one each."""
+    codes, uniques = pd.factorize(np.asarray(values, dtype=object), use_na_sentinel=False)
+    names = [str(u) for u in uniques]
+    order = sorted(range(len(names)), key=names.__getitem__)
+    rank = np.empty(len(names), dtype=np.intp)
+    rank[order] = np.arange(len(names), dtype=np.intp)
+    return [names[i] for i in order], rank[codes]
 
 
 class SamplesError(ValueError):

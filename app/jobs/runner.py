@@ -26,6 +26,7 @@ from app.jobs.outputs import jsonable, table_columns, write_outputs
 from app.jobs.registry import JobType, registry
 from app.reports.inputs import describe_inputs
 from app.settings import Settings
+from processing.samples import sensor_index
 from processing.screening.flags import filter_streams
 from processing.spacecraft import IDENTITY_QUATERNION, Spacecraft
 from processing.streams import STREAMS
@@ -244,8 +245,9 @@ def apply_magnetometer_calibration(streams: dict[str, dict[str, np.ndarray]], va
 def input_counts(inputs: TaskInputs) -> dict[str, dict[str, int]]:
     counts: dict[str, dict[str, int]] = {}
     for name, cols in inputs.streams.items():
-        sensors, n = np.unique(np.asarray(cols["sensor"], dtype=object).astype(str), return_counts=True)
-        counts[name] = {str(s): int(k) for s, k in zip(sensors, n, strict=True)}
+        sensors, index = sensor_index(cols["sensor"])
+        n = np.bincount(index, minlength=len(sensors))
+        counts[name] = {s: int(k) for s, k in zip(sensors, n, strict=True)}
     return counts
 
 

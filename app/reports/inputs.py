@@ -15,6 +15,7 @@ from numpy.typing import NDArray
 from sqlalchemy.orm import Session
 
 from app.reports.summary import iso
+from processing.samples import sensor_index
 from processing.screening.coverage import find_gaps
 from processing.streams import STREAMS
 from processing.units import NS_PER_S
@@ -69,10 +70,10 @@ def describe_inputs(streams: Mapping[str, Mapping[str, Any]], start_tai_ns: int,
         t_all = np.asarray(cols["time_tai_ns"], dtype=np.int64)
         if t_all.size == 0:
             continue
-        sensors = np.asarray(cols["sensor"], dtype=object).astype(str)
+        sensors, index = sensor_index(cols["sensor"])
         out[name] = {}
-        for sensor in sorted(set(sensors.tolist())):
-            mask = sensors == sensor
+        for i, sensor in enumerate(sensors):
+            mask = index == i
             out[name][sensor] = _describe_series(t_all[mask], int(mask.sum()), start_tai_ns, end_tai_ns)
     return out
 

@@ -14,6 +14,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from processing.environment import igrf_field_E_nT, sun_position_I_m, sunlit_fraction
+from processing.samples import sensor_index
 from processing.screening.tools import hampel, quantisation_step, stuck, time_grid_irregular
 
 Columns = Mapping[str, NDArray[Any]]
@@ -163,11 +164,11 @@ class ScreeningResult:
 
 def sensor_groups(cols: Columns) -> list[tuple[str, NDArray[np.int64]]]:
     """(sensor, row indices in time order) per sensor of a stream, sensors sorted."""
-    sensors = np.asarray(cols["sensor"], dtype=object).astype(str)
+    sensors, index = sensor_index(cols["sensor"])
     t = np.asarray(cols["time_tai_ns"], dtype=np.int64)
     out = []
-    for s in sorted(set(sensors.tolist())):
-        idx = np.flatnonzero(sensors == s)
+    for i, s in enumerate(sensors):
+        idx = np.flatnonzero(index == i)
         out.append((s, idx[np.argsort(t[idx], kind="stable")]))
     return out
 

@@ -55,32 +55,49 @@ def flags_table(result: ScreeningResult, streams: Mapping[str, Columns]) -> dict
     return {k: np.concatenate(v) for k, v in parts.items()}
 
 
-def accepted_mask(flags: Mapping[str, ArrayLike], stream: str, cols: Columns) -> NDArray[np.bool_]:
+def accepted_mask(flags: Mapping[str, ArrayLike], stream: str, cols: Columns,
+                  rejected: NDArray[np.bool_] | None = None) -> NDArray[np.bool_]:
     """Rows of ``cols`` (a stream's columns) that a stored flags table does not reject.
 
     flags: the columns of :func:`flags_table` (as stored: time_tai_ns, stream, sensor, key, accepted).
     A row is rejected when the table has a row with the same (stream, sensor, key, time) and
     accepted False; rows the table does not know (other window, stream not screened) are kept.
+    rejected: the flags rows of ``stream`` with accepted False, when the caller has them (:func:`filter_streams`).
     """
-    f_stream = np.asarray(flags["stream"]).astype(str)
-    sel = (f_stream == stream) & ~np.asarray(flags["accepted"], dtype=bool)
+    sel = _rejected_rows(flags, stream) if rejected is None else rejected
     n = len(cols["time_tai_ns"])
+    keep = np.ones(n, dtype=bool)
     if not np.any(sel):
-        return np.ones(n, dtype=bool)
-    # the rejected rows picked before their strings are converted (not the whole table's column)
+        return keep
+    bad_t = np.asarray(flags["time_tai_ns"], dtype=np.int64)[sel]
+    t = np.asarray(cols["time_tai_ns"], dtype=np.int64)
+    # only rows at a rejected time can match: their strings are compared, not the whole stream's
+    cand = np.flatnonzero(np.isin(t, bad_t))
+    if cand.size == 0:
+        return keep
     bad = pd.MultiIndex.from_arrays([np.asarray(flags["sensor"])[sel].astype(str),
-                                     np.asarray(flags["key"])[sel].astype(str),
-                                     np.asarray(flags["time_tai_ns"], dtype=np.int64)[sel]])
-    rows = pd.MultiIndex.from_arrays([np.asarray(cols["sensor"]).astype(str), sample_keys(stream, cols).astype(str),
-                                      np.asarray(cols["time_tai_ns"], dtype=np.int64)])
-    return ~np.asarray(rows.isin(bad), dtype=bool)
+                                     np.asarray(flags["key"])[sel].astype(str), bad_t])
+    sub = {k: np.asarray(v)[cand] for k, v in cols.items()}
+    rows = pd.MultiIndex.from_arrays([sub["sensor"].astype(str), sample_keys(stream, sub).astype(str), t[cand]])
+    keep[cand] = ~np.asarray(rows.isin(bad), dtype=bool)
+    return keep
+
+
+def _rejected_rows(flags: Mapping[str, ArrayLike], stream: str) -> NDArray[np.bool_]:
+    return (np.asarray(flags["stream"], dtype=object) == stream) & ~np.asarray(flags["accepted"], dtype=bool)
 
 
 def filter_streams(streams: Mapping[str, Columns], flags: Mapping[str, ArrayLike]) -> dict[str, dict[str, Any]]:
     """Streams with the rows a flags table rejects removed (streams left empty are dropped)."""
     out: dict[str, dict[str, Any]] = {}
+    # the table's stream column compared once (not once per stream): its codes, per stream the rejected rows
+    codes, names = pd.factorize(np.asarray(flags["stream"], dtype=object), use_na_sentinel=False)
+    refused = ~np.asarray(flags["accepted"], dtype=bool)
+    index = {str(v): i for i, v in enumerate(names)}
     for name, cols in streams.items():
-        keep = accepted_mask(flags, name, cols)
+        code = index.get(name)
+        rejected = np.zeros(codes.size, dtype=bool) if code is None else (codes == code) & refused
+        keep = accepted_mask(flags, name, cols, rejected)
         if np.any(keep):
             out[name] = {k: np.asarray(v)[keep] for k, v in cols.items()}
     return out

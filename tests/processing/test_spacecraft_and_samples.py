@@ -133,3 +133,14 @@ def test_view_columns_and_shapes_are_checked() -> None:
         GyroSamples.from_columns("g", {"time_tai_ns": np.arange(2), "wx": np.zeros(2), "wy": np.zeros(2)})
     with pytest.raises(SamplesError, match=r"w_G_rad_s has shape \(2, 3\), expected 3 rows"):
         GyroSamples(sensor="g", time_tai_ns=np.arange(3), w_G_rad_s=np.zeros((2, 3)))
+
+
+def test_sensor_index_gives_sorted_names_and_each_rows_position():
+    from processing.samples import sensor_index
+
+    column = np.array(["st2", "st1", "st2", "gyro", "st1"], dtype=object)
+    names, index = sensor_index(column)
+    assert names == ["gyro", "st1", "st2"] == sorted(set(column.tolist()))
+    np.testing.assert_array_equal(np.array(names, dtype=object)[index], column)
+    empty_names, empty_index = sensor_index(np.zeros(0, dtype=object))
+    assert empty_names == [] and empty_index.size == 0

@@ -11,6 +11,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from processing.attitude import rotations
+from processing.samples import sensor_index
 from processing.screening.flags import filter_streams
 from processing.spacecraft import Spacecraft
 from processing.tasks import TaskResult
@@ -48,16 +49,17 @@ def _bridge_gyro(raw: Mapping[str, NDArray[Any]], kept: Mapping[str, NDArray[Any
     """The gyro rows with rejected rates interpolated from the accepted ones where the accepted neighbours are
     at most max_s apart (the others removed); (columns, number bridged)."""
     t = np.asarray(raw["time_tai_ns"], dtype=np.int64)
-    sensor = np.asarray(raw["sensor"]).astype(str)
+    sensors, index = sensor_index(raw["sensor"])
     kt = np.zeros(0, np.int64) if kept is None else np.asarray(kept["time_tai_ns"], dtype=np.int64)
-    ks = np.zeros(0, str) if kept is None else np.asarray(kept["sensor"]).astype(str)
+    kept_sensors, kept_index = ([], np.zeros(0, np.intp)) if kept is None else sensor_index(kept["sensor"])
     keep = np.zeros(t.size, dtype=bool)
     values = {c: np.asarray(raw[c], dtype=np.float64).copy() for c in ("wx", "wy", "wz")}
     n_bridged = 0
-    for name in np.unique(sensor):
-        rows = np.flatnonzero(sensor == name)
+    for code, name in enumerate(sensors):
+        rows = np.flatnonzero(index == code)
         rows = rows[np.argsort(t[rows], kind="stable")]
-        acc_t = np.sort(kt[ks == name])
+        k = kept_sensors.index(name) if name in kept_sensors else -1
+        acc_t = np.sort(kt[kept_index == k])
         accepted = _in_sorted(t[rows], acc_t)
         keep[rows[accepted]] = True
         rej = rows[~accepted]

@@ -82,6 +82,42 @@ def test_summary_and_flags_table() -> None:
     assert accepted_mask(table, "gyro", {"time_tai_ns": np.arange(3), "sensor": np.array(["g"] * 3)}).all()
 
 
+def test_filter_matches_rejections_by_sensor_key_and_time_exactly() -> None:
+    """The stored table's rejections, matched against a plain set of (stream, sensor, key, time): rows that share a
+    rejected row's time but not its sensor or panel are kept; a shuffled table (as read back) gives the same."""
+    rng = np.random.default_rng(11)
+    n = 600
+    t = np.repeat(np.arange(n // 6, dtype=np.int64) * 10**9, 6)  # six panels per time
+    panels = {"time_tai_ns": t, "sensor": rng.choice(np.array(["A", "B"], dtype=object), n),
+              "panel": np.tile(np.arange(6), n // 6), "current": rng.normal(size=n)}
+    gyro = {"time_tai_ns": t[::6], "sensor": np.full(n // 6, "A", dtype=object), "wx": rng.normal(size=n // 6)}
+    streams = {"panel_currents": panels, "gyro": gyro}
+    rows = {k: [] for k in ("time_tai_ns", "stream", "sensor", "key", "accepted")}
+    for name, cols in streams.items():
+        keys = [str(p) for p in cols["panel"]] if "panel" in cols else [""] * len(cols["time_tai_ns"])
+        for i, ti in enumerate(cols["time_tai_ns"]):
+            rows["time_tai_ns"].append(int(ti))
+            rows["stream"].append(name)
+            rows["sensor"].append(str(cols["sensor"][i]))
+            rows["key"].append(keys[i])
+            rows["accepted"].append(bool(rng.random() > 0.1))
+    table = {k: np.array(v, dtype=object if k in ("stream", "sensor", "key") else None) for k, v in rows.items()}
+    refused = {(s, se, k, int(ti)) for s, se, k, ti, a in zip(table["stream"], table["sensor"], table["key"],
+                                                               table["time_tai_ns"], table["accepted"], strict=True)
+               if not a}
+    order = rng.permutation(len(table["time_tai_ns"]))
+    shuffled = {k: v[order] for k, v in table.items()}
+    for flags in (table, shuffled):
+        kept = filter_streams(streams, flags)
+        for name, cols in streams.items():
+            keys = [str(p) for p in cols["panel"]] if "panel" in cols else [""] * len(cols["time_tai_ns"])
+            expected = np.array([(name, str(se), k, int(ti)) not in refused
+                                 for se, k, ti in zip(cols["sensor"], keys, cols["time_tai_ns"], strict=True)])
+            np.testing.assert_array_equal(accepted_mask(flags, name, cols), expected)
+            np.testing.assert_array_equal(kept[name]["time_tai_ns"], cols["time_tai_ns"][expected])
+    assert 0 < sum(1 for r in refused if r[0] == "panel_currents") < n  # both kinds of rows present
+
+
 def test_j2_aware_energy_against_two_body() -> None:
     """With the model error of the J2 variant (300 m^2/s^2), the paper's two-body h flags a real (J2)
     orbit all round; the J2-aware h flags nothing. A reference orbit removes the need for a fit."""
