@@ -92,7 +92,7 @@ def table_to_arrow(columns: dict[str, Any]) -> pa.Table:
         arrays["time"] = iso_column(np.asarray(columns["time_tai_ns"], np.int64))
     for name, values in columns.items():
         arr = np.asarray(values)
-        arrays[name] = pa.array(arr.tolist() if arr.dtype == object else arr)
+        arrays[name] = pa.array(arr)  # object arrays (text) converted by Arrow directly, not via a list
     return pa.table(arrays)
 
 

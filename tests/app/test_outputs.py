@@ -68,6 +68,20 @@ def test_tables_truncated_and_left_out_within_the_job_budget(tmp_path, monkeypat
     assert any("truncated" in n for n in result.notes) and any("left out" in n for n in result.notes)
 
 
+def test_table_columns_convert_as_from_python_values():
+    """Text, missing text, numbers and flags stored with the types a list of Python values would give."""
+    import pyarrow as pa
+
+    cols = {"time_tai_ns": T0 + np.arange(4, dtype=np.int64), "reason": np.array(["", "spike", None, "a;b"], object),
+            "n": np.arange(4), "x": np.array([0.5, np.nan, 1.0, 2.0]), "ok": np.array([True, False, True, True])}
+    table = outputs.table_to_arrow(cols)
+    assert table.column_names == ["time", *cols]
+    for name, values in cols.items():
+        assert table.column(name).type == pa.array(values.tolist()).type, name
+    assert table.column("reason").combine_chunks().equals(pa.array(cols["reason"].tolist()))
+    assert table.column("reason").null_count == 1
+
+
 def test_iso_column_is_the_iso_text():
     t = T0 + np.array([0, 123, 10**8, 86_400 * 10**9], dtype=np.int64)
     assert outputs.iso_column(t).to_pylist() == timescales.tai_ns_to_iso(t).tolist()
