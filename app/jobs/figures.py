@@ -1,8 +1,9 @@
 """A job's figures drawn from its stored artifacts, on first request (issue 24: "figures rendered once, lazily").
 
 With ``ATTITUDE_FIGURES=lazy`` (the default) a job stores its summary, tables and files and draws no figure; it
-records only the figure *names* (:func:`figure_names`: the names each job type's ``figures()`` gives, told from
-the summary and the tables' row counts without drawing). A figure is drawn when it is first asked for: the job
+records only the figure *names* (:func:`figure_names`: the names each job type declares beside its ``figures()``,
+``JobType.figure_names``, told from the summary and the tables' row counts without drawing). A figure is drawn
+when it is first asked for: the job
 type's ``figures()`` runs on the result read back from the stored artifacts (:func:`stored_result`), the figure
 is rendered exactly as the job would have rendered it (:func:`app.jobs.outputs.figure_png`) and stored as the
 artifact ``<name>.png`` (app.services.figures), so it is rendered once.
@@ -28,50 +29,11 @@ from processing.tasks import TaskResult
 if TYPE_CHECKING:
     from app.jobs.registry import JobType
 
-SEPARATOR = "__"  # a pipeline's (reconstruction's) stage prefix, as app.jobs.types.reconstruction names them
-
-_FIXED: dict[str, tuple[str, ...]] = {
-    "telemetry_coverage": ("coverage",),
-    "executor_check": (),
-    "star_tracker_accuracy": ("rodrigues_fit", "residuals", "rates", "spectra", "residual_spectra"),
-    "gyro_bias_fit": ("rates", "residuals", "subintervals"),
-    "orbital_attitude": ("orbital_angles", "virtual_orbit"),
-    "gyroless_ekf": ("attitude", "attitude_sigma", "rates", "consistency", "disturbance"),
-    "alignment_calibration": ("drift", "attitude_residuals", "rate_residuals", "rate_coverage"),
-    "definitive_attitude": ("attitude_sigma", "gyro_bias", "residuals", "consistency"),
-    "gyro_noise": ("allan_deviation",),
-    "magnetometer_calibration": ("field_residuals",),
-}
-"""Job types whose ``figures()`` always gives these names (the conditional ones are in :func:`figure_names`)."""
-
-
-def figure_names(job_type: str, summary: Mapping[str, Any], rows: Mapping[str, int]) -> list[str] | None:
-    """The names of the figures ``figures()`` of ``job_type`` draws for a result with this summary and tables
-    (``rows``: table name -> row count), without drawing; None for a job type these rules do not know (its
-    figures are then listed once drawn). tests/app/test_lazy_figures.py checks these names against ``figures()``
-    for every registered job type."""
-    if job_type == "reconstruction":
-        out: list[str] = []
-        for stage, entry in (summary.get("stages") or {}).items():
-            if not isinstance(entry, Mapping) or entry.get("status") != "succeeded":
-                continue
-            prefix = f"{stage}{SEPARATOR}"
-            names = figure_names(stage, entry.get("summary") or {},
-                                 {k[len(prefix):]: n for k, n in rows.items() if k.startswith(prefix)})
-            if names is None:
-                return None
-            out += [prefix + n for n in names]
-        return out
-    if job_type == "data_screening":
-        if not rows.get("flags"):
-            return []
-        return ["flags_timeline", *(["criteria"] if rows.get("statistics") else [])]
-    if job_type == "vector_attitude":
-        return ["attitude", "residuals"] if rows.get("attitude") else []
-    if job_type == "star_tracker_accuracy":
-        return [*_FIXED[job_type], *(["inter_boresight_angle"] if "inter_head" in rows else [])]
-    fixed = _FIXED.get(job_type)
-    return None if fixed is None else list(fixed)
+def figure_names(job_type: JobType, summary: Mapping[str, Any], rows: Mapping[str, int]) -> list[str] | None:
+    """The names of the figures ``job_type.figures`` draws for a result with this summary and tables (``rows``:
+    table name -> row count), without drawing: the job type's own ``figure_names``; None when it declares none
+    (its figures are then listed once drawn)."""
+    return None if job_type.figure_names is None else job_type.figure_names(summary, rows)
 
 
 def table_rows(tables: Mapping[str, Mapping[str, Any]]) -> dict[str, int]:

@@ -7,7 +7,7 @@ wraps is a pure function in ``processing/``. Add new modules to ``_MODULES``.
 from __future__ import annotations
 
 import importlib
-from collections.abc import Callable, Collection, Sequence
+from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -36,6 +36,10 @@ class JobType:
     # None: every stream above
     input_streams: Callable[[Any], Collection[str]] | None = None
     figures: Callable[[TaskResult, Any], dict[str, Figure]] = field(default=lambda result, params: {})
+    # the names ``figures`` gives for a result with this summary and tables (table name -> row count), told
+    # without drawing: lazy figures are recorded by name at job end (app.jobs.figures); None: known once drawn.
+    # Declared beside ``figures``; tests/app/test_lazy_figures.py checks the two agree for every job type.
+    figure_names: Callable[[Mapping[str, Any], Mapping[str, int]], list[str] | None] | None = None
     description: str = ""
     reference: tuple[str, ...] = ()  # reference kinds the task can use (each optional)
     produces_calibration: str | None = None  # on success with summary["calibration_complete"]: a new version
@@ -48,6 +52,11 @@ class JobType:
     # the summary's declared schema (the OpenAPI ``<Type>Summary``; a test checks it on simulated runs);
     # None: the one in app/jobs/results.py for this name, else the generic one (warnings typed)
     result_model: type[BaseModel] | None = None
+
+
+def always(*names: str) -> Callable[[Mapping[str, Any], Mapping[str, int]], list[str]]:
+    """``JobType.figure_names`` of a job type whose ``figures`` always gives these figures."""
+    return lambda summary, rows: list(names)
 
 
 _MODULES = ("coverage", "executor_check", "star_tracker_accuracy", "gyro_bias_fit", "orbital_attitude", "gyroless_ekf",

@@ -298,7 +298,7 @@ def _execute(job_id: str, settings: Settings, sessions: sessionmaker[Session], a
             figures = job_type.figures(result, params)
         # lazy (default): no figure is drawn here; their names, told without drawing, are recorded and each is
         # drawn from the stored artifacts when first requested (app.jobs.figures, app.services.figures)
-        names = figure_names(job_type.name, result.summary, table_rows(result.tables))
+        names = figure_names(job_type, result.summary, table_rows(result.tables))
         summary = jsonable({"warnings": [w.as_dict() for w in result.warnings], **result.summary})
         stored = write_outputs(artifacts, job_id, result, figures, summary)
         figure_record = {"mode": settings.figures, "names": names}

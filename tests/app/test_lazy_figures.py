@@ -20,6 +20,7 @@ from sqlalchemy import delete, select
 from app.jobs import figures as lazy
 from app.jobs.outputs import figure_png, jsonable, write_outputs
 from app.jobs.registry import registry
+from app.jobs.types import reconstruction
 from app.main import create_app
 from app.services import figures as figure_service
 from app.settings import Settings
@@ -215,13 +216,13 @@ def pixels(png: bytes) -> np.ndarray:
 def test_figures_from_stored_artifacts_match_the_in_memory_ones(job_type, tmp_path: Path):
     jt, result, params = _in_process(job_type)
     in_memory = jt.figures(result, params)
-    names = lazy.figure_names(jt.name, result.summary, lazy.table_rows(result.tables))
+    names = lazy.figure_names(jt, result.summary, lazy.table_rows(result.tables))
     assert names == list(in_memory)  # the names recorded at job end are those figures() draws
     compared = list(in_memory)
     if job_type == "reconstruction":
         # its figures are its stages' figures, each compared pixel for pixel in its own job type's case above:
         # here the first of every stage (the stage prefixes and the stage results read back under them)
-        compared = list({name.split(lazy.SEPARATOR)[0]: name for name in reversed(compared)}.values())
+        compared = list({name.split(reconstruction.SEPARATOR)[0]: name for name in reversed(compared)}.values())
         assert len(compared) >= 4
     eager = {name: figure_png(in_memory[name]) for name in compared}
 

@@ -35,7 +35,7 @@ from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field, PositiveFloat, model_validator
 
 from app.jobs.plausibility import check_heads
-from app.jobs.registry import JobType
+from app.jobs.registry import JobType, always
 from app.jobs.types.alignment_calibration_figures import figures
 from app.jobs.types.alignment_calibration_summary import (
     CalibrationRun,
@@ -212,7 +212,7 @@ JOB = JobType(
     run=run,
     streams=("star_tracker",),
     optional_streams=("gyro_increments", "gyro"),
-    figures=figures,
+    figures=figures, figure_names=always("drift", "attitude_residuals", "rate_residuals", "rate_coverage"),
     produces_calibration="gyro",
     description=(
         "Gyro drift, gyro-to-star-tracker misalignment and scale-factor error from flight data (000): two-pass "

@@ -8,7 +8,7 @@ import numpy as np
 from matplotlib.figure import Figure
 from pydantic import BaseModel, ConfigDict, Field
 
-from app.jobs.registry import JobType
+from app.jobs.registry import JobType, always
 from app.reports.headline import Answer
 from processing.screening.coverage import find_gaps
 from processing.tasks import Progress, TaskInputs, TaskResult
@@ -113,7 +113,7 @@ def figures(result: TaskResult, params: Params) -> dict[str, Figure]:
 
 JOB = JobType(
     name="telemetry_coverage", title="Telemetry coverage and gaps", paper="", params=Params, run=run,
-    any_stream=True, figures=figures,
+    any_stream=True, figures=figures, figure_names=always("coverage"),
     description="Per stream and sensor: samples, nominal period, gaps (last sample before, first after, "
                 "missing samples) and completeness over the window.",
     headline=(Answer("n_gaps", "Gaps in the window"), Answer("n_streams", "Streams with samples")),

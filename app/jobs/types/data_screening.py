@@ -8,7 +8,7 @@ inputs with :func:`processing.screening.flags.filter_streams` and the stored ``f
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any, Literal
 
 import numpy as np
@@ -273,9 +273,17 @@ def figures(result: TaskResult, params: Params) -> dict[str, Figure]:
     return out
 
 
+def figure_names(summary: Mapping[str, Any], rows: Mapping[str, int]) -> list[str]:
+    """The names :func:`figures` gives (from the tables' row counts)."""
+    if not rows.get("flags"):
+        return []
+    return ["flags_timeline", *(["criteria"] if rows.get("statistics") else [])]
+
+
 JOB = JobType(
     name="data_screening", title="Telemetry screening (002 eqs. 15-17)", paper="002 eqs. 15-17", params=Params,
-    run=run, any_stream=True, input_streams=input_streams, figures=figures, reference=("rinex_nav", "reference_orbit"),
+    run=run, any_stream=True, input_streams=input_streams, figures=figures, figure_names=figure_names,
+    reference=("rinex_nav", "reference_orbit"),
     description="Flags every sample of GNSS, magnetometer, panel-current, visibility and other streams with the "
                 "criteria it fails: energy integral (eq. 15, J2-aware), field magnitude against IGRF-14 (eq. 16), "
                 "panel currents against the shadow/unit-sun models (eq. 17), orbit plane, kinematic and velocity "

@@ -21,7 +21,7 @@ from matplotlib.figure import Figure
 from pydantic import BaseModel, ConfigDict, Field
 
 from app.jobs.plausibility import check_heads, midpoint_rates
-from app.jobs.registry import JobType
+from app.jobs.registry import JobType, always
 from app.reports.headline import Answer
 from app.reports.sections import ReportContext, ReportSection, ReportTable
 from processing.definitive.comparison import compare_alignment, compare_gyro_bias_fit
@@ -430,7 +430,8 @@ def report_sections(ctx: ReportContext) -> list[ReportSection]:
 JOB = JobType(
     name="definitive_attitude", title="Definitive attitude over a whole arc (MEKF + RTS smoother)", paper="",
     params=Params, run=run, streams=("star_tracker",), optional_streams=("gyro", "gyro_increments"),
-    figures=figures, report_sections=report_sections,
+    figures=figures,
+    figure_names=always("attitude_sigma", "gyro_bias", "residuals", "consistency"), report_sections=report_sections,
     headline=(Answer("attitude_sigma_arcsec.median", "Smoothed attitude 1σ, median over the arc", unit="arcsec",
                      frame="body (B), about its axes"),
               Answer("gyro_bias_rad_s", "Gyro bias b, arc mean (w_meas = w + b)", sigma="gyro_bias_sigma_rad_s",

@@ -28,7 +28,7 @@ from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field, PositiveFloat
 
 from app.jobs.plausibility import checked
-from app.jobs.registry import JobType
+from app.jobs.registry import JobType, always
 from app.jobs.types.gyro_bias_fit_figures import figures
 from app.jobs.types.gyro_bias_fit_summary import (
     Outcome,
@@ -407,7 +407,7 @@ JOB = JobType(
     params=Params,
     run=run,
     streams=("star_tracker", "gyro"),
-    figures=figures,
+    figures=figures, figure_names=always("rates", "residuals", "subintervals"),
     description=(
         "Integrates the gyro rates on their own grid (003 §2.3 schemes), fits the initial attitude and "
         "constant gyro offsets to the star-tracker quaternions by Gauss-Newton with the variational "

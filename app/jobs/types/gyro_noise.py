@@ -26,7 +26,7 @@ import numpy as np
 from matplotlib.figure import Figure
 from pydantic import BaseModel, ConfigDict, Field
 
-from app.jobs.registry import JobType
+from app.jobs.registry import JobType, always
 from app.reports.headline import Answer
 from processing.attitude import rotations
 from processing.definitive.estimate import estimate_definitive_attitude
@@ -180,7 +180,7 @@ def figures(result: TaskResult, params: Params) -> dict[str, Figure]:
 JOB = JobType(
     name="gyro_noise", title="Gyro noise: Allan deviation, ARW, bias instability, RRW", paper="",
     params=Params, run=run, streams=(), optional_streams=("gyro", "gyro_increments", "star_tracker"),
-    figures=figures,
+    figures=figures, figure_names=always("allan_deviation"),
     headline=(Answer("angle_random_walk_deg_sqrt_h", "Angle random walk N", unit="deg/√h", frame="gyro (G)"),
               Answer("bias_instability_deg_h", "Bias instability B", unit="deg/h", frame="gyro (G)"),
               Answer("rate_random_walk_rad_s_sqrt_s", "Rate random walk K", unit="rad/s/√s", frame="gyro (G)"),

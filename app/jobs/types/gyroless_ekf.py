@@ -17,7 +17,7 @@ import numpy as np
 from matplotlib.figure import Figure
 from pydantic import BaseModel, ConfigDict, Field
 
-from app.jobs.registry import JobType
+from app.jobs.registry import JobType, always
 from app.reports.headline import Answer
 from processing.gyroless.ekf import FilterTuning
 from processing.gyroless.estimation import GyrolessError, GyrolessResult, GyrolessSettings, estimate_gyroless_attitude
@@ -402,7 +402,9 @@ def figures(result: TaskResult, params: Params) -> dict[str, Figure]:
 JOB = JobType(
     name="gyroless_ekf", title="Gyroless attitude from magnetometer and sun sensor (EKF)", paper="004",
     params=Params, run=run, streams=("magnetometer", "sun_sensor", "gnss"), optional_streams=("magnetorquer",),
-    figures=figures, applies_calibration="magnetometer",
+    figures=figures,
+    figure_names=always("attitude", "attitude_sigma", "rates", "consistency", "disturbance"),
+    applies_calibration="magnetometer",
     description="Attitude q_OB (orbital frame of 004), rates and in-plane disturbance torque from magnetometer, "
                 "sun sensor and GNSS with the EKF of paper 004 or a multiplicative EKF, plus an RTS smoother; "
                 "reference field IGRF-14, Sun from ERFA; consistency by NIS and innovation whiteness.",

@@ -19,7 +19,7 @@ import numpy as np
 from matplotlib.figure import Figure
 from pydantic import BaseModel, ConfigDict, Field
 
-from app.jobs.registry import JobType
+from app.jobs.registry import JobType, always
 from app.reports.headline import Answer
 from app.reports.sections import ReportContext, ReportSection, ReportTable
 from processing.tasks import Progress, ResultWarning, TaskError, TaskInputs, TaskResult
@@ -282,7 +282,8 @@ def report_sections(ctx: ReportContext) -> list[ReportSection]:
 JOB = JobType(
     name="magnetometer_calibration", title="Magnetometer calibration (|B| matching against IGRF-14)", paper="",
     params=Params, run=run, streams=("magnetometer", "gnss"), optional_streams=("magnetorquer",),
-    figures=figures, report_sections=report_sections, produces_calibration="magnetometer",
+    figures=figures,
+    figure_names=always("field_residuals"), report_sections=report_sections, produces_calibration="magnetometer",
     headline=(Answer("bias_nT", "Magnetometer bias b", sigma="bias_sigma_nT", frame="magnetometer (M)"),
               Answer("scale_factor_errors", "Scale-factor errors D_ii", sigma="scale_factor_sigma", unit="ppm",
                      scale=1e6, frame="magnetometer (M)"),

@@ -16,7 +16,7 @@ import numpy as np
 from matplotlib.figure import Figure
 from pydantic import BaseModel, ConfigDict, Field
 
-from app.jobs.registry import JobType
+from app.jobs.registry import JobType, always
 from app.reports.headline import Answer
 from processing.formats.ccsds_adm import aem_segment, write_aem
 from processing.frames.earth_orientation import EarthOrientation, FrameInputError
@@ -248,7 +248,8 @@ def figures(result: TaskResult, params: Params) -> dict[str, Figure]:
 
 JOB = JobType(
     name="orbital_attitude", title="Attitude relative to the orbital frame", paper="003 §1.6", params=Params,
-    run=run, streams=("star_tracker", "gnss"), figures=figures, reference=(EOP_KIND,),
+    run=run, streams=("star_tracker", "gnss"), figures=figures,
+    figure_names=always("orbital_angles", "virtual_orbit"), reference=(EOP_KIND,),
     description="Pitch, yaw and roll of the body relative to the orbital frame (003 §1.6) from star-tracker "
                 "quaternions, the mounting and GNSS states (smoothed), with Earth orientation from an uploaded "
                 "IERS finals2000A data set or zero; statistics, time series, virtual orbit and a CCSDS AEM of the "

@@ -434,9 +434,29 @@ def figures(result: TaskResult, params: Params) -> dict[str, Figure]:
     return out
 
 
+def figure_names(summary: Mapping[str, Any], rows: Mapping[str, int]) -> list[str] | None:
+    """The names :func:`figures` gives: each succeeded stage's own ``figure_names``, prefixed; None when a stage's
+    are not known without drawing."""
+    available = _available()
+    out: list[str] = []
+    for name, stage in (summary.get("stages") or {}).items():
+        jt = available.get(name)
+        if jt is None or not isinstance(stage, Mapping) or stage.get("status") != "succeeded":
+            continue
+        if jt.figure_names is None:
+            return None
+        prefix = f"{name}{SEPARATOR}"
+        names = jt.figure_names(stage.get("summary") or {},
+                                {k[len(prefix):]: n for k, n in rows.items() if k.startswith(prefix)})
+        if names is None:
+            return None
+        out += [prefix + n for n in names]
+    return out
+
+
 JOB = JobType(
     name="reconstruction", title="Attitude reconstruction pipeline", paper="002, 003, 000", params=Params, run=run,
-    any_stream=True, figures=figures,
+    any_stream=True, figures=figures, figure_names=figure_names,
     description="Screening -> star-tracker accuracy -> gyro fit -> orbital attitude (-> alignment calibration) on "
                 "one window, passing screened data and the gyro bias along; one combined report.",
     headline=(),  # each stage's own headline (app.reports.job_report)

@@ -20,7 +20,7 @@ from app.jobs import multi_head
 from app.jobs.partitions import map_partitions
 from app.jobs.plausibility import check_heads
 from app.jobs.registry import JobType
-from app.jobs.types.star_tracker_accuracy_figures import figures
+from app.jobs.types.star_tracker_accuracy_figures import figure_names, figures
 from app.reports.headline import Answer
 from processing.star_tracker.accuracy import (
     StarTrackerAccuracy,
@@ -379,7 +379,7 @@ JOB = JobType(
     streams=("star_tracker",),
     optional_streams=("gyro",),
     input_streams=input_streams,
-    figures=figures,
+    figures=figures, figure_names=figure_names,
     description=(
         "Per-axis accuracy of a star tracker from its quaternions (003 §1.3-1.5): mean quaternion, Rodrigues "
         "parameters smoothed by a sine series plus linear trend, residual std about the sensor axes; with gyro "

@@ -3,6 +3,7 @@ its multi-head mode), drawn from the job's tables and summary."""
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -155,6 +156,12 @@ def _fig_residual_spectrum(result: TaskResult) -> Figure:
     axes[0].set_title("dashed: gyro lines aliased to the star-tracker sampling; dotted: smoother cutoff", fontsize=9)
     axes[-1].set_xlabel("frequency [Hz]")
     return fig
+
+
+def figure_names(summary: Mapping[str, Any], rows: Mapping[str, int]) -> list[str]:
+    """The names :func:`figures` gives (the inter-boresight angle with two heads' ``inter_head`` table)."""
+    return ["rodrigues_fit", "residuals", "rates", "spectra", "residual_spectra",
+            *(["inter_boresight_angle"] if "inter_head" in rows else [])]
 
 
 def figures(result: TaskResult, params: Any) -> dict[str, Figure]:

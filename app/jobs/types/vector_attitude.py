@@ -7,6 +7,7 @@ and reports q_OB with 002's pitch/yaw/roll, the method and loss per epoch and th
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any, Literal
 
 import numpy as np
@@ -196,10 +197,15 @@ def figures(result: TaskResult, params: Params) -> dict[str, Figure]:
     return out
 
 
+def figure_names(summary: Mapping[str, Any], rows: Mapping[str, int]) -> list[str]:
+    """The names :func:`figures` gives (none without attitude rows)."""
+    return ["attitude", "residuals"] if rows.get("attitude") else []
+
+
 JOB = JobType(
     name="vector_attitude", title="Attitude from vector observations (002)", paper="002 eqs. 5-14, figure 1",
     params=Params, run=run, streams=("gnss",), optional_streams=("magnetometer", "panel_currents", "gnss_visibility"),
-    figures=figures, reference=("rinex_nav",), applies_calibration="magnetometer",
+    figures=figures, figure_names=figure_names, reference=("rinex_nav",), applies_calibration="magnetometer",
     description="Attitude q_OB and 002's pitch/yaw/roll per epoch from the GNSS antenna axis (visibility of the "
                 "navigation satellites, eqs. 5-7), the magnetometer against IGRF-14 and the sun vector from the "
                 "panel currents; strongly coupled Wahba solution (eqs. 8-9) with three vectors, loosely coupled "
