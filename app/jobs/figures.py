@@ -31,9 +31,9 @@ if TYPE_CHECKING:
 
 def figure_names(job_type: JobType, summary: Mapping[str, Any], rows: Mapping[str, int]) -> list[str] | None:
     """The names of the figures ``job_type.figures`` draws for a result with this summary and tables (``rows``:
-    table name -> row count), without drawing: the job type's own ``figure_names``; None when it declares none
-    (its figures are then listed once drawn)."""
-    return None if job_type.figure_names is None else job_type.figure_names(summary, rows)
+    table name -> row count), without drawing (``JobType.names_of_figures``); None when the job type does not
+    declare them (its figures are then listed once drawn)."""
+    return job_type.names_of_figures(summary, rows)
 
 
 def table_rows(tables: Mapping[str, Mapping[str, Any]]) -> dict[str, int]:

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import importlib
 from collections.abc import Callable, Collection, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from pydantic import BaseModel
@@ -19,6 +19,11 @@ if TYPE_CHECKING:  # the job types import matplotlib when the registry is first 
     from matplotlib.figure import Figure
 
     from app.reports.headline import Answer
+
+
+def no_figures(result: TaskResult, params: Any) -> dict[str, Figure]:
+    """``JobType.figures`` of a job type that draws none."""
+    return {}
 
 
 @dataclass(frozen=True)
@@ -35,7 +40,7 @@ class JobType:
     # (e.g. star_tracker_accuracy with use_gyro = false): the runner loads only those (required ones always);
     # None: every stream above
     input_streams: Callable[[Any], Collection[str]] | None = None
-    figures: Callable[[TaskResult, Any], dict[str, Figure]] = field(default=lambda result, params: {})
+    figures: Callable[[TaskResult, Any], dict[str, Figure]] = no_figures
     # the names ``figures`` gives for a result with this summary and tables (table name -> row count), told
     # without drawing: lazy figures are recorded by name at job end (app.jobs.figures); None: known once drawn.
     # Declared beside ``figures``; tests/app/test_lazy_figures.py checks the two agree for every job type.
@@ -52,6 +57,13 @@ class JobType:
     # the summary's declared schema (the OpenAPI ``<Type>Summary``; a test checks it on simulated runs);
     # None: the one in app/jobs/results.py for this name, else the generic one (warnings typed)
     result_model: type[BaseModel] | None = None
+
+    def names_of_figures(self, summary: Mapping[str, Any], rows: Mapping[str, int]) -> list[str] | None:
+        """The names ``figures`` gives for this summary and tables, without drawing: ``figure_names``'s answer;
+        none for a job type without figures; None when ``figure_names`` is not declared."""
+        if self.figure_names is not None:
+            return self.figure_names(summary, rows)
+        return [] if self.figures is no_figures else None
 
 
 def always(*names: str) -> Callable[[Mapping[str, Any], Mapping[str, int]], list[str]]:

@@ -247,6 +247,45 @@ class _StreamScreening:
     st_intervals: list[_Interval]
 
 
+NEEDS_TRACK = frozenset({"magnetometer", "panel_currents", "gnss_visibility"})
+"""Streams whose criteria need the spacecraft's position (the accepted GNSS states): screened after GNSS."""
+
+
+@dataclass(frozen=True)
+class _GnssPart:
+    """The GNSS stream to screen (a part for the mapper)."""
+
+    cols: Columns
+    p: ScreeningParams
+    reference_orbit: Columns | None
+    reference_frame: str
+
+    @property
+    def name(self) -> str:
+        return "gnss"
+
+
+@dataclass(frozen=True)
+class _GnssScreening:
+    criteria: list[Criterion]
+    n: int
+    notes: list[str]
+    findings: dict[str, Any]
+    track: GnssTrack | None
+
+
+def _screen_part(part: _GnssPart | _StreamPart) -> _GnssScreening | _StreamScreening:
+    """One part of :func:`screen`: the GNSS stream (its criteria and the track of its accepted states) or
+    another stream."""
+    if isinstance(part, _StreamPart):
+        return _screen_stream(part)
+    col = Collector("gnss", len(part.cols["time_tai_ns"]))
+    notes: list[str] = []
+    findings: dict[str, Any] = {}
+    track = screen_gnss(col, part.cols, part.p, part.reference_orbit, part.reference_frame, notes, findings)
+    return _GnssScreening(col.criteria(), col.n, notes, findings, track)
+
+
 def _screen_stream(part: _StreamPart) -> _StreamScreening:
     """The criteria of one non-GNSS stream (the GNSS track already known)."""
     name, cols, p = part.name, part.cols, part.p
@@ -282,10 +321,10 @@ def screen(streams: Mapping[str, Columns], spacecraft: Spacecraft, params: Scree
     columns); spacecraft: its configuration (solar panels; star-tracker and gyro mountings);
     reference_orbit: optional columns time_tai_ns, x, y, z, vx, vy, vz (m, m/s) in ``reference_frame``
     ("ITRF" or an inertial frame such as "GCRF"/"EME2000"); nav: rinex_nav columns for the
-    visibility check. selected: streams to screen (default: all given). GNSS is always screened first
-    when present, because its accepted samples give the position the other models need; the other
-    streams are then independent of each other and screened through ``mapper`` (processing.tasks.Mapper:
-    e.g. across a cluster's workers; the result does not depend on it).
+    visibility check. selected: streams to screen (default: all given). The streams are screened through
+    ``mapper`` (processing.tasks.Mapper: e.g. across a cluster's workers; the result does not depend on it) in
+    two passes: GNSS (when present) beside the streams whose criteria need no position (gyro, star tracker,
+    ...), then the streams of :data:`NEEDS_TRACK`, which need the position that GNSS's accepted states give.
     """
     p = params or ScreeningParams()
     env = env or Environment()
@@ -295,23 +334,37 @@ def screen(streams: Mapping[str, Columns], spacecraft: Spacecraft, params: Scree
     notes: list[str] = []
     criteria: list[Criterion] = []
     n_rows: dict[str, int] = {}
-    track: GnssTrack | None = None
+    others = [name for name in chosen if name != "gnss"]
+    # the streams whose criteria need no position are screened beside GNSS, the others once its track is known
+    first: list[_GnssPart | _StreamPart] = [_StreamPart(name, streams[name], spacecraft, streams.get("gyro"), p,
+                                                        None, env, nav)
+                                            for name in others if name not in NEEDS_TRACK]
     if "gnss" in streams:
-        gcol = Collector("gnss", len(streams["gnss"]["time_tai_ns"]))
-        track = screen_gnss(gcol, streams["gnss"], p, reference_orbit, reference_frame, notes, findings)
-        if "gnss" in chosen:
-            criteria += gcol.criteria()
-            n_rows["gnss"] = gcol.n
-    else:
+        first.insert(0, _GnssPart(streams["gnss"], p, reference_orbit, reference_frame))
+    done: dict[str, _StreamScreening] = {}
+    track: GnssTrack | None = None
+    for part, out in zip(first, mapper(_screen_part, first), strict=True):
+        if isinstance(out, _GnssScreening):
+            track = out.track
+            notes += out.notes
+            findings.update(out.findings)
+            if "gnss" in chosen:
+                criteria += out.criteria
+                n_rows["gnss"] = out.n
+        elif isinstance(part, _StreamPart):
+            done[part.name] = out
+    if "gnss" not in streams:
         notes.append("no GNSS stream: criteria needing the spacecraft position are not applied")
-    parts = [_StreamPart(name, streams[name], spacecraft, streams.get("gyro"), p, track, env, nav)
-             for name in chosen if name != "gnss"]
-    for part, done in zip(parts, mapper(_screen_stream, parts), strict=True):
-        criteria += done.criteria
-        n_rows[part.name] = done.n
-        notes += done.notes
-        st_intervals += done.st_intervals
-        for key, value in done.findings.items():  # per stream: lists in stream order, dicts by stream
+    second = [_StreamPart(name, streams[name], spacecraft, streams.get("gyro"), p, track, env, nav)
+              for name in others if name in NEEDS_TRACK]
+    done.update({part.name: out for part, out in zip(second, mapper(_screen_part, second), strict=True)})
+    for name in others:  # merged in stream order, whichever pass screened them
+        out = done[name]
+        criteria += out.criteria
+        n_rows[name] = out.n
+        notes += out.notes
+        st_intervals += out.st_intervals
+        for key, value in out.findings.items():  # per stream: lists in stream order, dicts by stream
             if isinstance(value, list):
                 findings.setdefault(key, []).extend(value)
             elif isinstance(value, dict):

@@ -80,7 +80,8 @@ def _screening_params(p: Params) -> ScreeningParams:
 
 
 def stream_map(func: Callable[[Any], Any], parts: Sequence[Any]) -> list[Any]:
-    """The streams (after GNSS) screened across the executor's workers (app.jobs.partitions)."""
+    """The streams screened across the executor's workers (app.jobs.partitions), in the two passes of
+    processing.screening.criteria.screen."""
     return map_partitions(func, parts, stage="streams")
 
 

@@ -13,7 +13,7 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from app.jobs.registry import JobType, always
+from app.jobs.registry import JobType
 from processing.tasks import WARNING_CODES, Progress, ResultWarning, TaskError, TaskInputs, TaskResult
 
 
@@ -40,5 +40,5 @@ def run(inputs: TaskInputs, params: Params, progress: Progress) -> TaskResult:
     return TaskResult(summary={"duration_s": params.duration_s, "worker_pid": os.getpid()}, warnings=warnings)
 
 
-JOB = JobType(name="executor_check", title="Executor check", paper="", params=Params, run=run, figure_names=always(),
+JOB = JobType(name="executor_check", title="Executor check", paper="", params=Params, run=run,
               description="Diagnostic job: runs for duration_s with progress; optionally fails or crashes.")

@@ -443,11 +443,9 @@ def figure_names(summary: Mapping[str, Any], rows: Mapping[str, int]) -> list[st
         jt = available.get(name)
         if jt is None or not isinstance(stage, Mapping) or stage.get("status") != "succeeded":
             continue
-        if jt.figure_names is None:
-            return None
         prefix = f"{name}{SEPARATOR}"
-        names = jt.figure_names(stage.get("summary") or {},
-                                {k[len(prefix):]: n for k, n in rows.items() if k.startswith(prefix)})
+        names = jt.names_of_figures(stage.get("summary") or {},
+                                    {k[len(prefix):]: n for k, n in rows.items() if k.startswith(prefix)})
         if names is None:
             return None
         out += [prefix + n for n in names]

@@ -277,9 +277,10 @@ def test_rolling_median_is_numpys_nanmedian_of_the_windows():
         np.testing.assert_array_equal(med, np.nanmedian(win, axis=-1))
 
 
-def test_the_streams_after_gnss_give_the_same_result_on_any_mapper() -> None:
-    """The non-GNSS streams are screened through the mapper (a cluster's workers in a job): run in reverse
-    order on other threads, the criteria, notes and findings are those of the serial run, in its order."""
+def test_the_streams_give_the_same_result_on_any_mapper() -> None:
+    """The streams are screened through the mapper (a cluster's workers in a job) in two passes, GNSS beside the
+    streams that need no position, then those that need its track: run in reverse order on other threads, the
+    criteria, notes and findings are those of the serial run, in its order."""
     from concurrent.futures import ThreadPoolExecutor
 
     sc, serial = screened(0)
@@ -291,7 +292,9 @@ def test_the_streams_after_gnss_give_the_same_result_on_any_mapper() -> None:
             return list(reversed(list(pool.map(func, list(reversed(parts))))))
 
     mapped = scr.screen(sc.streams, Spacecraft.from_json(sc.config), nav=nav(), mapper=reversed_threads)
-    assert len(names) == 1 and len(names[0]) >= 3 and "gnss" not in names[0]
+    free = [s for s in sc.streams if s != "gnss" and s not in scr.NEEDS_TRACK]
+    assert len(names) == 2 and names[0] == ["gnss", *free]
+    assert set(names[1]) == scr.NEEDS_TRACK and not set(names[0]) & set(names[1])
     assert [(c.stream, c.name) for c in mapped.criteria] == [(c.stream, c.name) for c in serial.criteria]
     for a, b in zip(mapped.criteria, serial.criteria, strict=True):
         for field in ("flagged", "applied", "statistic"):
