@@ -258,3 +258,15 @@ def test_read_back_tables_have_the_job_columns():
     assert back["n"].dtype == np.int64 and back["ok"].dtype == bool
     np.testing.assert_array_equal(back["time_tai_ns"], cols["time_tai_ns"])
     np.testing.assert_array_equal(back["x"], cols["x"])
+
+
+def test_figure_names_of_a_job_type_without_figures_or_without_declared_names():
+    from app.jobs.registry import JobType
+    from app.jobs.types.executor_check import Params
+
+    plain = JobType(name="plain", title="", paper="", params=Params, run=lambda i, p, g: None)  # type: ignore[arg-type]
+    assert lazy.figure_names(plain, {}, {}) == []
+    drawing = dataclasses.replace(plain, figures=lambda result, params: {})
+    assert lazy.figure_names(drawing, {}, {}) is None  # listed once drawn
+    declared = dataclasses.replace(drawing, figure_names=lambda summary, rows: ["a"] if rows.get("t") else [])
+    assert lazy.figure_names(declared, {}, {"t": 3}) == ["a"] and lazy.figure_names(declared, {}, {}) == []
