@@ -45,7 +45,7 @@ TEST_WORKERS ?= 3
 test: $(DEV)
 	$(BIN)/ruff check .
 	@$(BIN)/mypy app storage processing > $(VENV)/mypy.log 2>&1 & mypy=$$!; \
-	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 $(BIN)/python -m pytest -n $(TEST_WORKERS) --dist loadfile; tests=$$?; \
+	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 $(BIN)/python -m pytest -n $(TEST_WORKERS) --dist loadfile --durations=25; tests=$$?; \
 	wait $$mypy; types=$$?; echo "mypy app storage processing:"; cat $(VENV)/mypy.log; \
 	test $$tests -eq 0 -a $$types -eq 0
 
