@@ -494,3 +494,22 @@ def test_bad_input_raises(func, args, match):
     with pytest.raises(RotationValueError, match=match):
         func(*args)
     assert issubclass(RotationValueError, ValueError)
+
+
+@pytest.mark.parametrize("shapes", [((4,), (4,)), ((500, 4), (4,)), ((1, 4), (300, 4)), ((7, 1, 4), (5, 4))])
+def test_quat_multiply_is_the_vector_form_bit_for_bit(shapes):
+    """The per-component product gives the same bits as s = p0 q0 - p_v . q_v, v = p0 q_v + q0 p_v + p_v x q_v
+    (numpy's sum and cross), for broadcast shapes, and agrees with scipy's composition."""
+    rng = np.random.default_rng(5)
+    p, q = rng.normal(size=shapes[0]), rng.normal(size=shapes[1])
+    p0, pv, q0, qv = p[..., :1], p[..., 1:], q[..., :1], q[..., 1:]
+    vector_form = np.concatenate([p0 * q0 - np.sum(pv * qv, axis=-1, keepdims=True),
+                                  p0 * qv + q0 * pv + np.cross(pv, qv)], axis=-1)
+    got = rot.quat_multiply(p, q)
+    assert got.shape == vector_form.shape
+    assert np.array_equal(got, vector_form)
+    pu, qu = p / np.linalg.norm(p, axis=-1, keepdims=True), q / np.linalg.norm(q, axis=-1, keepdims=True)
+    ref = (Rotation.from_quat(np.broadcast_to(pu, got.shape).reshape(-1, 4), scalar_first=True)
+           * Rotation.from_quat(np.broadcast_to(qu, got.shape).reshape(-1, 4), scalar_first=True))
+    np.testing.assert_allclose(rot.quat_canonical(rot.quat_multiply(pu, qu)).reshape(-1, 4),
+                               rot.quat_canonical(ref.as_quat(scalar_first=True)), atol=1e-14)
