@@ -130,12 +130,12 @@ def table_columns(table: pa.Table) -> dict[str, np.ndarray]:
 def iso_column(tai_ns: NDArray[np.int64]) -> pa.Array:
     """ISO UTC times as an Arrow string column, built from the character codes without a Python string per
     value (the same column as ``pa.array(timescales.tai_ns_to_iso(tai_ns))``)."""
-    codes = timescales.tai_ns_to_iso_codes(tai_ns)
+    codes = timescales.tai_ns_to_iso_codes(tai_ns, dtype=np.uint8)
     n, width = codes.shape
     if n * width >= 2**31 - 1:  # beyond 32-bit offsets
         return pa.array(timescales.tai_ns_to_iso(tai_ns), pa.string())
     offsets = np.arange(n + 1, dtype=np.int32) * np.int32(width)
-    return pa.StringArray.from_buffers(n, pa.py_buffer(offsets), pa.py_buffer(codes.astype(np.uint8)))
+    return pa.StringArray.from_buffers(n, pa.py_buffer(offsets), pa.py_buffer(codes))
 
 
 def write_outputs(store: ArtifactStore, job_id: str, result: TaskResult,

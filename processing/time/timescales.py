@@ -28,6 +28,7 @@ All functions are vectorised (no Python loop over samples), keep the input's sha
 
 from __future__ import annotations
 
+import functools
 from typing import Any
 
 import numpy as np
@@ -275,9 +276,10 @@ def tai_ns_to_iso(tai_ns: ArrayLike, scale: str = "utc") -> NDArray[np.object_]:
     return codes.view(f"U{codes.shape[1]}").reshape(t.shape).astype(object)
 
 
-def tai_ns_to_iso_codes(tai_ns: ArrayLike, scale: str = "utc") -> NDArray[np.uint32]:
-    """The text of :func:`tai_ns_to_iso` as character codes, (N, width) uint32 (ASCII) for the N values of
-    tai_ns flattened: for writers that build string columns without a Python object per value."""
+def tai_ns_to_iso_codes(tai_ns: ArrayLike, scale: str = "utc", dtype: Any = np.uint32) -> NDArray[Any]:
+    """The text of :func:`tai_ns_to_iso` as character codes, (N, width) ``dtype`` (uint32, or uint8 for byte
+    strings; ASCII) for the N values of tai_ns flattened: for writers that build string columns without a Python
+    object per value."""
     scale = check_scale(scale)
     t = as_int_ns(tai_ns, "tai_ns")
     t = t.reshape(-1)
@@ -290,22 +292,57 @@ def tai_ns_to_iso_codes(tai_ns: ArrayLike, scale: str = "utc") -> NDArray[np.uin
     sub_ns = ns_of_day % NS_PER_S
     n_frac = next(d for d in (0, 3, 6, 9) if not np.any(sub_ns % 10 ** (9 - d)))
     width = 19 + (n_frac + 1 if n_frac else 0) + (scale == "utc")
-    out = np.zeros((t.size, width), dtype=np.uint32)
-    y, m, d = civil_from_days(day)
+    out = np.zeros((t.size, width), dtype=dtype)
     sec_of_day = ns_of_day // NS_PER_S
-    hour = np.minimum(sec_of_day // 3600, 23)  # the leap second reads 23:59:60
-    minute = np.minimum((sec_of_day - hour * 3600) // 60, 59)
-    for col, value, w in ((0, y, 4), (5, m, 2), (8, d, 2), (11, hour, 2), (14, minute, 2),
-                          (17, sec_of_day - hour * 3600 - minute * 60, 2)):
-        put_digits(out, col, value, w)
-    out[:, [4, 7]] = ord("-")
+    if t.size >= TABLE_MIN_ROWS and int(day.max()) - int(day.min()) < t.size and 0 <= sec_of_day.min() \
+            and sec_of_day.max() <= _SECONDS_IN_LEAP_DAY:
+        # long series: "YYYY-MM-DD" per distinct day and "hh:mm:ss" per second of the day, gathered per row
+        first = int(day.min())
+        dates = np.zeros((int(day.max()) - first + 1, 10), dtype=dtype)
+        _put_date(dates, np.arange(first, first + dates.shape[0], dtype=np.int64))
+        out[:, :10] = dates[day - first]
+        out[:, 11:19] = _clock_table(np.dtype(dtype))[sec_of_day]
+    else:
+        _put_date(out, day)
+        _put_clock(out, sec_of_day)
     out[:, 10] = ord("T")
-    out[:, [13, 16]] = ord(":")
     if n_frac:
         out[:, 19] = ord(".")
         put_digits(out, 20, sub_ns // 10 ** (9 - n_frac), n_frac)
     if scale == "utc":
         out[:, -1] = ord("Z")
+    return out
+
+
+TABLE_MIN_ROWS = 20_000
+"""From this many values on, :func:`tai_ns_to_iso_codes` gathers dates and clock times from tables."""
+_SECONDS_IN_LEAP_DAY = 86_400  # the last second of a day with a leap second reads 23:59:60
+
+
+def _put_date(out: NDArray[Any], day: NDArray[np.int64]) -> None:
+    """"YYYY-MM-DD" of the days since 1970-01-01 into columns 0-9."""
+    y, m, d = civil_from_days(day)
+    for col, value, w in ((0, y, 4), (5, m, 2), (8, d, 2)):
+        put_digits(out, col, value, w)
+    out[:, [4, 7]] = ord("-")
+
+
+def _put_clock(out: NDArray[Any], sec_of_day: NDArray[np.int64]) -> None:
+    """"hh:mm:ss" of the seconds of the day (86,400: the leap second, 23:59:60) into columns 11-18."""
+    hour = np.minimum(sec_of_day // 3600, 23)  # the leap second reads 23:59:60
+    minute = np.minimum((sec_of_day - hour * 3600) // 60, 59)
+    for col, value, w in ((11, hour, 2), (14, minute, 2), (17, sec_of_day - hour * 3600 - minute * 60, 2)):
+        put_digits(out, col, value, w)
+    out[:, [13, 16]] = ord(":")
+
+
+@functools.lru_cache(maxsize=4)
+def _clock_table(dtype: np.dtype[Any]) -> NDArray[Any]:
+    """(86,401, 8) codes of "hh:mm:ss" for every second of a day, the leap second last (a constant)."""
+    table = np.zeros((_SECONDS_IN_LEAP_DAY + 1, 19), dtype=dtype)
+    _put_clock(table, np.arange(_SECONDS_IN_LEAP_DAY + 1, dtype=np.int64))
+    out = table[:, 11:19].copy()
+    out.flags.writeable = False
     return out
 
 

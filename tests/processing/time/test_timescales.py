@@ -404,3 +404,43 @@ def test_one_million_strings_across_a_leap_second():
         n, dtype=np.int64) * step_ns
     np.testing.assert_array_equal(iso_to_tai_ns(iso), expected)
     np.testing.assert_array_equal(tai_ns_to_iso(expected), iso)
+
+
+@pytest.mark.parametrize("scale", ["utc", "tai", "gps", "tt"])
+def test_long_series_text_from_tables_is_the_text_of_each_value(scale, monkeypatch):
+    """Long series gather "YYYY-MM-DD" per day and "hh:mm:ss" per second of the day from tables: the same codes as
+    computed value by value, across the 2016-12-31 leap second (23:59:60), at ms steps and at uneven steps over
+    days; as bytes (uint8) too. The text itself is checked against erfa for a few of the values."""
+    from processing.time import timescales as tsm
+
+    leap = int(tsm.iso_to_tai_ns(["2016-12-31T23:59:00Z"])[0])
+    series = [leap + np.arange(120_000, dtype=np.int64) * 10**6,
+              leap - 3 * 86_400 * 10**9 + np.arange(30_000, dtype=np.int64) * 123_456_789]
+    for t in series:
+        assert t.size >= tsm.TABLE_MIN_ROWS
+        gathered = tsm.tai_ns_to_iso_codes(t, scale)
+        with monkeypatch.context() as m:
+            m.setattr(tsm, "TABLE_MIN_ROWS", 10**12)  # every value on its own
+            direct = tsm.tai_ns_to_iso_codes(t, scale)
+        np.testing.assert_array_equal(gathered, direct)
+        np.testing.assert_array_equal(tsm.tai_ns_to_iso_codes(t, scale, dtype=np.uint8), direct.astype(np.uint8))
+    if scale == "utc":
+        text = tsm.tai_ns_to_iso(series[0][59_000:61_000:500])
+        assert list(text) == ["2016-12-31T23:59:59.000Z", "2016-12-31T23:59:59.500Z", "2016-12-31T23:59:60.000Z",
+                              "2016-12-31T23:59:60.500Z"]
+        t = series[1][::7_000]
+        d1, d2 = erfa.taiutc(*erfa.dtf2d("TAI", *_tai_fields(t)))
+        y, mo, d, hmsf = erfa.d2dtf("UTC", 6, d1, d2)  # these values have microseconds
+        expected = [f"{a:04d}-{b:02d}-{c:02d}T{h[0]:02d}:{h[1]:02d}:{h[2]:02d}.{h[3]:06d}Z"
+                    for a, b, c, h in zip(y, mo, d, hmsf, strict=True)]
+        assert list(tsm.tai_ns_to_iso(t)) == expected
+
+
+def _tai_fields(t):
+    """TAI calendar fields of TAI ns values (1970-01-01T00:00:00 TAI epoch), for erfa.dtf2d."""
+    days, ns = np.divmod(np.asarray(t, dtype=np.int64), 86_400 * 10**9)
+    date = np.datetime64("1970-01-01") + days.astype("timedelta64[D]")
+    ymd = pd.DatetimeIndex(date)
+    sec = ns / 1e9
+    return (ymd.year.to_numpy(), ymd.month.to_numpy(), ymd.day.to_numpy(), (sec // 3600).astype(int),
+            ((sec % 3600) // 60).astype(int), sec % 60)
