@@ -85,6 +85,12 @@ def csv_safe(table: pa.Table) -> pa.Table:
     return pa.table(columns, names=table.column_names)
 
 
+def text_columns(table: pa.Table) -> list[str]:
+    """The columns worth Parquet's dictionary encoding: text (sensor names, reasons, ISO times repeat); numbers
+    rarely do, and trying costs more than their encoding (a spacecraft-day's tables: 0.48 -> 0.25-0.31 s, smaller)."""
+    return [f.name for f in table.schema if pa.types.is_string(f.type) or pa.types.is_large_string(f.type)]
+
+
 def table_to_arrow(columns: dict[str, Any]) -> pa.Table:
     """Columns -> Arrow; a ``time_tai_ns`` column gets an ISO UTC ``time`` column in front of it."""
     arrays: dict[str, Any] = {}
@@ -185,7 +191,7 @@ def _write_table(store: ArtifactStore, job_id: str, name: str, columns: dict[str
         budget.outputs["truncated"][name] = {"rows": n_rows, "stored_rows": TABLE_MAX_ROWS}
     table = table_to_arrow(columns)
     buf = io.BytesIO()
-    pq.write_table(table, buf)
+    pq.write_table(table, buf, use_dictionary=text_columns(table))
     if not budget.take(f"{name}.parquet", buf.tell()):
         return []
     out = [store.write(job_id, f"{name}.parquet", buf.getvalue(), kind="table",
