@@ -173,7 +173,7 @@ class SineSeriesSolver:
         self._lin = np.column_stack([np.ones(n), self.tau])
         self._sqrt_w = None if self._w is None else np.sqrt(self._w)
         if self.route == "dst":
-            self._c_lin = dst_coefficients(self._lin)[: self.max_harmonics]
+            self._c_lin = dst_coefficients(self._lin, self.max_harmonics)
             self.rank_harmonics = self.max_harmonics
         else:
             self._design = sine_series_design(self.tau, self.max_harmonics, 0.0, 1.0)
@@ -217,7 +217,7 @@ class SineSeriesSolver:
         n = self.n_samples
         if self.route == "dst":
             x = np.concatenate([self._lin, yy], axis=1)
-            c = np.concatenate([self._c_lin[:m], dst_coefficients(yy)[:m]], axis=1)
+            c = np.concatenate([self._c_lin[:m], dst_coefficients(yy, m)], axis=1)
             r = x - dst_synthesis(c, n)  # (I - P_S) applied to every column
             q, rr = np.linalg.qr(r[:, :2])
             trend = scipy.linalg.solve_triangular(rr, q.T @ r[:, 2:])
@@ -265,7 +265,7 @@ class SineSeriesSolver:
         if self.route == "dst":
             line = np.linalg.lstsq(self._lin, yy, rcond=None)[0]
             x = np.concatenate([self._lin, yy - self._lin @ line], axis=1)
-            c = np.concatenate([self._c_lin, dst_coefficients(x[:, 2:])[:top]], axis=1)
+            c = np.concatenate([self._c_lin, dst_coefficients(x[:, 2:], top)], axis=1)
             gram0 = x.T @ x
             cum = np.cumsum(0.5 * (n - 1) * c[:, :, None] * c[:, None, :], axis=0)
             gram = np.concatenate([gram0[None], gram0[None] - cum], axis=0)  # (P, 2+K, 2+K)

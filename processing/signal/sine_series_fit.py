@@ -78,18 +78,22 @@ class SineSeriesFit:
         for lo in range(0, n if self.harmonics else 0, _CHUNK):
             theta = theta_all[lo:lo + _CHUNK]
             s1, c1 = np.sin(theta), np.cos(theta)
-            sm, cm = s1, c1
             s_blk = np.empty((theta.size, _RESEED), order="F")
             c_blk = np.empty((theta.size, _RESEED), order="F")
+            tmp = np.empty(theta.size)
             for j0 in range(0, self.harmonics, _RESEED):
                 b = min(_RESEED, self.harmonics - j0)
-                for i in range(b):
-                    s_blk[:, i], c_blk[:, i] = sm, cm
-                    j = j0 + i
-                    if (j + 1) % _RESEED == 0:
-                        sm, cm = np.sin((j + 2) * theta), np.cos((j + 2) * theta)
-                    else:
-                        sm, cm = sm * c1 + cm * s1, cm * c1 - sm * s1
+                if j0 == 0:
+                    s_blk[:, 0], c_blk[:, 0] = s1, c1
+                else:  # exact seeds of the block
+                    np.sin((j0 + 1) * theta, out=s_blk[:, 0])
+                    np.cos((j0 + 1) * theta, out=c_blk[:, 0])
+                for i in range(1, b):  # sin/cos((j0 + i + 1) theta) by angle addition, in place
+                    sp, cp, sn, cn = s_blk[:, i - 1], c_blk[:, i - 1], s_blk[:, i], c_blk[:, i]
+                    np.multiply(sp, c1, out=sn)
+                    sn += np.multiply(cp, s1, out=tmp)
+                    np.multiply(cp, c1, out=cn)
+                    cn -= np.multiply(sp, s1, out=tmp)
                 if value:
                     val[lo:lo + _CHUNK] += s_blk[:, :b] @ sine[j0:j0 + b]
                 if derivative:

@@ -356,8 +356,39 @@ def _ls_terms_nufft(t: NDArray, v: NDArray, f0: float, df: float, n: int) -> tup
     return a, b, yc, ys
 
 
+ESS_RECURRENCE_MAX = 64
+"""Uniform trial grids of at most this many frequencies (the refinement grids of spectral_lines.fit_sinusoid)
+take cos/sin by angle addition from the first frequency (:func:`_ess_uniform`): two trigonometric evaluations
+per sample and step instead of one each per frequency, which took 2/3 of the least-squares sums (a 9-point grid
+over 837,000 gyro samples: 0.26 s CPU); the rounding of the recurrence grows ~eps per step."""
+
+
+def _ess_uniform(t: NDArray, v: NDArray, f0: float, df: float, n: int) -> NDArray:
+    """:func:`explained_sum_of_squares` on the grid f0 + k df (k < n): the same centred least-squares sums as
+    :func:`_ls_terms`, one frequency at a time, with cos/sin(2 pi (f0 + k df) t) by angle addition."""
+    vc = v - v.mean(axis=0)
+    w0, dw = 2.0 * np.pi * f0 * t, 2.0 * np.pi * df * t
+    c, s = np.cos(w0), np.sin(w0)
+    cd, sd = np.cos(dw), np.sin(dw)
+    out = np.empty(n)
+    for k in range(n):  # trial frequencies (few)
+        if k:
+            c, s = c * cd - s * sd, s * cd + c * sd
+        cc_, sc_ = c - c.mean(), s - s.mean()
+        cc, ss, cs = cc_ @ cc_, sc_ @ sc_, cc_ @ sc_
+        yc, ys = cc_ @ vc, sc_ @ vc
+        det = cc * ss - cs * cs
+        a, b = (ss * yc - cs * ys) / det, (cc * ys - cs * yc) / det
+        out[k] = np.sum(a * yc + b * ys)
+    return out
+
+
 def explained_sum_of_squares(t: NDArray, v: NDArray, freq: NDArray) -> NDArray:
     """Sum over components of the explained sum of squares of the floating-mean least-squares sinusoid
-    at each trial frequency freq (F,) [Hz] for samples v (N, K) at t (N,) [s]; returns (F,)."""
+    at each trial frequency freq (F,) [Hz] for samples v (N, K) at t (N,) [s]; returns (F,). Small uniform
+    grids by angle addition (ESS_RECURRENCE_MAX)."""
+    df = _uniform_step(freq) if 1 < freq.size <= ESS_RECURRENCE_MAX else None
+    if df is not None and freq[0] > 0:
+        return _ess_uniform(t, v, float(freq[0]), df, freq.size)
     a, b, yc, ys = _ls_terms(t, v, freq)
     return np.sum(a * yc + b * ys, axis=1)

@@ -154,7 +154,7 @@ def fit_sinusoid(
             den = y0 - 2.0 * y1 + y2
             if den < 0:
                 f0 += 0.5 * (y0 - y2) / den * float(grid[1] - grid[0])
-    arg = 2.0 * np.pi * f0 * tc
+    arg = 2.0 * np.pi * tc * f0  # the product order of fit_sinusoids: the same design as its fit of one line
     design = np.column_stack([np.ones_like(tc), np.cos(arg), np.sin(arg)])
     coef = np.linalg.lstsq(design, v, rcond=None)[0]
     return SinusoidFit(f0, float(t[0]), coef[1], coef[2], coef[0], np.hypot(coef[1], coef[2]))
@@ -218,7 +218,8 @@ def find_lines(
     frequency common to the components) and subtracted from every component; repeated until nothing
     is significant or max_lines are found. A peak within 1.5 resolution cells of a line already
     found is the remainder of that line (gaps, frequency error), not a new one. Finally all lines
-    are fitted jointly at their frequencies. t_s (N,) [s], x (N,) or (N, K).
+    are fitted jointly at their frequencies (a single line: its first fit, which is that fit already).
+    t_s (N,) [s], x (N,) or (N, K).
     Returns (lines sorted by frequency, x with the lines removed, shape of x).
     """
     t = np.asarray(t_s, dtype=np.float64)
@@ -228,6 +229,7 @@ def find_lines(
     freqs: list[float] = []
     comps: list[set[int]] = []
     ratios: list[float] = []
+    first: SinusoidFit | None = None
     for _ in range(max_lines):
         spec = amplitude_spectrum_of_samples(t, work, oversample=oversample)
         peaks = detect_lines(spec, min_freq_hz=min_freq_hz, false_alarm=false_alarm)
@@ -236,6 +238,7 @@ def find_lines(
         best = max(peaks, key=lambda p: p.ratio)
         near = {p.component for p in peaks if abs(p.freq_hz - best.freq_hz) <= 2.0 * spec.resolution_hz}
         fit = fit_sinusoid(t, work, best.freq_hz)
+        first = first or fit  # fitted to x itself (nothing subtracted yet)
         work = work - fit.evaluate(t)
         same = [i for i, f in enumerate(freqs) if abs(f - fit.freq_hz) <= 1.5 * spec.resolution_hz]
         if same:  # what a first fit of a line left (gaps, frequency error): the same line
@@ -246,7 +249,8 @@ def find_lines(
         ratios.append(best.ratio)
     if not freqs:
         return [], v.copy()
-    fits = fit_sinusoids(t, cols, freqs)  # final joint least-squares fit of all lines (plus the mean)
+    # final joint least-squares fit of all lines (plus the mean); of one line, the first fit is that fit
+    fits = [first] if len(freqs) == 1 and first is not None else fit_sinusoids(t, cols, freqs)
     found = [FoundLine(fit, tuple(sorted(comps[i])), ratios[i]) for i, fit in enumerate(fits)]
     residual = cols - sum(fit.evaluate(t) for fit in fits)
     return sorted(found, key=lambda line: line.fit.freq_hz), residual.reshape(v.shape)

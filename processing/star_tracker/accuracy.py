@@ -439,7 +439,7 @@ def analyze_star_tracker_accuracy(
     report(0.7, "residuals")
     cmp = None if gyro is None else gyro_comparison(  # 5
         segments, [c.fit for c in corrected], gyro.fits, gyro.time_tai_ns, gyro.w_B_rad_s, inp.dcm_BS, sig.sigma,
-        gyro.lines.fits, mapper,
+        gyro.lines.fits, mapper, gyro.line_sines,
     )
     if gyro is not None and cmp is None:
         notes.append("gyro comparison left out: the final harmonic count needs more gyro samples than any segment has")

@@ -57,6 +57,7 @@ __all__ = [
     "gyro_harmonics",
     "line_coherence",
     "rate_noise_factor",
+    "segment_line_fits",
     "segment_line_motions",
     "segment_lines",
     "segment_motion",
@@ -238,19 +239,28 @@ def rate_noise_factor(solver: SineSeriesSolver, fit: SineSeriesFit) -> float:
     return float(np.sum(g_diag * weights))
 
 
+def segment_line_fits(gyro_fit: GyroSegmentFit | None, line_fits: Sequence[SinusoidFit]) -> tuple[SinusoidFit, ...]:
+    """The lines fitted jointly to one segment's gyro residuals at the frequencies it separates
+    (:func:`segment_lines`); none without gyro samples or lines."""
+    if gyro_fit is None or not line_fits:
+        return ()
+    return tuple(fit_sinusoids(gyro_fit.t_s, gyro_fit.residuals, segment_lines(line_fits, gyro_fit.t_s)))
+
+
 def segment_line_motions(
-    seg: SegmentSmoothing, gyro_fit: GyroSegmentFit | None, line_fits: Sequence[SinusoidFit], dcm_BS: NDArray
+    seg: SegmentSmoothing, gyro_fit: GyroSegmentFit | None, line_fits: Sequence[SinusoidFit], dcm_BS: NDArray,
+    sines: Sequence[SinusoidFit] | None = None,
 ) -> NDArray:
     """Step 7 on one segment, per line: theta_S of each of the J lines (J, N, 3) rad about the sensor
     axes (their sum is :func:`segment_motion`). A line merged into a stronger one at this segment's
-    resolution carries no motion of its own here (zeros); the stronger one carries both."""
+    resolution carries no motion of its own here (zeros); the stronger one carries both. ``sines``: the
+    segment's :func:`segment_line_fits` when already computed."""
     n = seg.sl.stop - seg.sl.start
     out = np.zeros((len(line_fits), n, 3))
     if gyro_fit is None or not line_fits:
         return out
-    tg = gyro_fit.t_s
     freqs = np.array([lf.freq_hz for lf in line_fits])
-    for fs in fit_sinusoids(tg, gyro_fit.residuals, segment_lines(line_fits, tg)):
+    for fs in segment_line_fits(gyro_fit, line_fits) if sines is None else sines:
         j = int(np.argmin(np.abs(freqs - fs.freq_hz)))
         out[j] += fs.integral(seg.t_s) @ dcm_BS  # rows: dcm_SB theta_B = dcm_BS^T theta_B
     return out
@@ -322,7 +332,8 @@ class GyroAnalysis:
     """Steps 5 and 7 together: gyro times (K,) and body rates (K, 3), per star-tracker segment the gyro
     smoothing (None without enough gyro samples) and the attitude oscillation motion_S (N_seg, 3) to
     remove (the coherent lines only), the gyro lines (``removed`` set per line) and their coherence
-    with the star tracker."""
+    with the star tracker; line_sines: per segment the lines fitted to its gyro residuals
+    (:func:`segment_line_fits`, reused by the comparison when its gyro fit is the same)."""
 
     time_tai_ns: NDArray
     w_B_rad_s: NDArray
@@ -330,6 +341,7 @@ class GyroAnalysis:
     motion_S: tuple[NDArray, ...]
     lines: GyroLines
     coherence: tuple[LineCoherence, ...] = ()
+    line_sines: tuple[tuple[SinusoidFit, ...], ...] = ()
 
     @property
     def removed_fits(self) -> tuple[SinusoidFit, ...]:
@@ -352,7 +364,9 @@ def analyze_gyro(
         return None
     fits = _fit_gyro_segments(segments, index, g_ns, w_B, mapper)
     lines = find_gyro_lines([f for f in fits if f is not None], g_ns, cutoff_hz, sample_period_s, false_alarm)
-    per_line = [segment_line_motions(seg, f, lines.fits, dcm_BS) for seg, f in zip(segments, fits, strict=True)]
+    sines = tuple(segment_line_fits(f, lines.fits) for f in fits)
+    per_line = [segment_line_motions(seg, f, lines.fits, dcm_BS, sn)
+                for seg, f, sn in zip(segments, fits, sines, strict=True)]
     if scale_S is None:
         coherence = tuple(LineCoherence(lf.freq_hz, 1.0, 0.0, True, False, np.zeros(3)) for lf in lines.fits)
     else:
@@ -360,7 +374,7 @@ def analyze_gyro(
     keep = np.array([c.removed for c in coherence], dtype=bool)
     motion = tuple(np.sum(m[keep], axis=0) if keep.any() else np.zeros(m.shape[1:]) for m in per_line)
     flagged = tuple(replace(line, removed=bool(keep[i // 3])) for i, line in enumerate(lines.lines))
-    return GyroAnalysis(g_ns, w_B, fits, motion, GyroLines(lines.fits, flagged), coherence)
+    return GyroAnalysis(g_ns, w_B, fits, motion, GyroLines(lines.fits, flagged), coherence, sines)
 
 
 @dataclass(frozen=True)
@@ -384,21 +398,22 @@ class _SegmentComparison:
 
 
 _ComparePart = tuple[SegmentSmoothing, SineSeriesFit, GyroSegmentFit, NDArray, "NDArray | None", NDArray, NDArray,
-                     Sequence[SinusoidFit]]
+                     Sequence[SinusoidFit], "Sequence[SinusoidFit] | None"]
 
 
 def _compare_segment(part: _ComparePart) -> _SegmentComparison:
     """One segment of the comparison (a part for the mapper): the segment, its final star-tracker fit, its gyro
     fit, the gyro times of that fit (K,), the gyro rates (K, 3) when the fit must be redone with the final
-    fit's cutoff (else None), dcm_BS, the sensor sigma and the gyro lines."""
-    seg, fit, gf, g_seg, w_seg, dcm_BS, sigma_S, line_fits = part
+    fit's cutoff (else None), dcm_BS, the sensor sigma, the gyro lines and their fits to this gyro fit's
+    residuals (:func:`segment_line_fits`; None: fitted here)."""
+    seg, fit, gf, g_seg, w_seg, dcm_BS, sigma_S, line_fits, sines = part
     if w_seg is not None:
         gf = fit_gyro_segment(seg, np.arange(g_seg.size), g_seg, w_seg, fit)
     tg, gfit, resid = gf.t_s, gf.fit, gf.residuals
     rss_s = np.sum(resid**2, axis=0)
-    seg_lines = segment_lines(line_fits, tg)
-    if seg_lines.size:
-        resid = resid - sum(fs.evaluate(tg) for fs in fit_sinusoids(tg, resid, seg_lines))
+    seg_sines = segment_line_fits(gf, line_fits) if sines is None or w_seg is not None else sines
+    if seg_sines:
+        resid = resid - sum(fs.evaluate(tg) for fs in seg_sines)
     inside = (tg >= 0.0) & (tg <= fit.span_s)
     tg_in = tg[inside]
     g_sm = gfit.fitted[inside]
@@ -406,7 +421,7 @@ def _compare_segment(part: _ComparePart) -> _SegmentComparison:
     off = np.mean(g_sm - st, axis=0)
     return _SegmentComparison(
         time_tai_ns=g_seg[inside], w_gyro=g_sm - off, w_st=st, offset=off, rss_smoothing=rss_s,
-        dof_smoothing=gfit.dof, rss_noise=np.sum(resid**2, axis=0), dof_noise=gfit.dof - 2 * seg_lines.size,
+        dof_smoothing=gfit.dof, rss_noise=np.sum(resid**2, axis=0), dof_noise=gfit.dof - 2 * len(seg_sines),
         var_st_B=rate_noise_factor(seg.solver, fit) * (dcm_BS**2 @ sigma_S**2), n_inside=tg_in.size,
         n_parameters=gf.harmonics + 2, n_gyro=tg.size,
     )
@@ -422,20 +437,25 @@ def gyro_comparison(
     sigma_S: NDArray,
     line_fits: Sequence[SinusoidFit],
     mapper: Mapper = serial_map,
+    line_sines: Sequence[Sequence[SinusoidFit]] | None = None,
 ) -> GyroComparison | None:
     """Step 5 (003 §1.4): smoothed gyro (the cutoff of each segment's final fit ``fits``) against the
     star-tracker rates, offsets matched. The gyro fits of step 7 are reused when the harmonic count is
     the same; segments without gyro samples (None) or with too few for the final harmonic count are left
-    out (None when that leaves none). The segments go through ``mapper``."""
+    out (None when that leaves none). The segments go through ``mapper``. line_sines: per segment the lines
+    fitted to the residuals of gyro_fits (GyroAnalysis.line_sines), reused where the gyro fit is; None:
+    fitted again."""
     todo: list[_ComparePart] = []
-    for seg, fit, gf in zip(segments, fits, gyro_fits, strict=True):
+    for i, (seg, fit, gf) in enumerate(zip(segments, fits, gyro_fits, strict=True)):
         if gf is None:
             continue
         harmonics = gyro_harmonics(fit.harmonics, fit.span_s, gf.t_s)
         refit = harmonics != gf.harmonics
         if refit and not enough_gyro_samples(gf.idx.size, harmonics):
             continue  # the final M needs more gyro samples than the segment has (criterion ``samples``)
-        todo.append((seg, fit, gf, g_ns[gf.idx], w_B_gyro[gf.idx] if refit else None, dcm_BS, sigma_S, line_fits))
+        sines = None if refit or line_sines is None else line_sines[i]
+        todo.append((seg, fit, gf, g_ns[gf.idx], w_B_gyro[gf.idx] if refit else None, dcm_BS, sigma_S, line_fits,
+                     sines))
     if not todo:
         return None
     parts: list[_SegmentComparison] = mapper(_compare_segment, todo)

@@ -173,17 +173,35 @@ GridFit = tuple[_Candidate, float, float, FloatArray, FloatArray]
 """A convention's grid fit: (candidate, score, its tau, c (3,), residuals (P, 3))."""
 
 
+def _end_attitudes(gyro: GyroAttitude, iv: _Intervals, tau: float) -> tuple[FloatArray, FloatArray]:
+    """U(t_a + tau) and U(t_b + tau) (P, 4): an end shared with the next interval's start (the contiguous blocks
+    of the final fit) is that start's attitude, computed once (the same rows)."""
+    u_a = gyro.attitude(iv.t_a + tau)
+    shared = iv.next_shared[:-1]
+    u_b = np.empty_like(u_a)
+    u_b[:-1][shared] = u_a[1:][shared]
+    own = ~iv.next_shared
+    own[-1] = True
+    u_b[own] = gyro.attitude(iv.t_b[own] + tau)
+    return u_a, u_b
+
+
 def _gyro_relative(gyro: GyroAttitude, iv: _Intervals, tau: float, q_SG: FloatArray) -> FloatArray:
     """dU_n,S(tau) (P, 4): the gyro's relative rotation over each interval shifted by tau, sensor axes."""
-    du = rotations.quat_multiply(rotations.quat_conjugate(gyro.attitude(iv.t_a + tau)), gyro.attitude(iv.t_b + tau))
+    u_a, u_b = _end_attitudes(gyro, iv, tau)
+    du = rotations.quat_multiply(rotations.quat_conjugate(u_a), u_b)
     return rotations.quat_multiply(rotations.quat_multiply(q_SG, du), rotations.quat_conjugate(q_SG))
+
+
+def _misfit(du: FloatArray, cand: _Candidate) -> FloatArray:
+    """e (P, 3) = rotvec(dU_S^-1 o dQ) for the gyro's relative rotations du (P, 4)."""
+    return rotations.quat_to_rotvec(rotations.quat_multiply(rotations.quat_conjugate(du), cand.dq))
 
 
 def _residual(gyro: GyroAttitude, iv: _Intervals, cand: _Candidate, tau: float) -> tuple[FloatArray, FloatArray]:
     """(e (P, 3) = rotvec(dU_S^-1 o dQ), theta (P, 3) = rotvec(dU_S)) at the offset tau."""
     du = _gyro_relative(gyro, iv, tau, cand.q_SG)
-    e = rotations.quat_to_rotvec(rotations.quat_multiply(rotations.quat_conjugate(du), cand.dq))
-    return e, rotations.quat_to_rotvec(du)
+    return _misfit(du, cand), rotations.quat_to_rotvec(du)
 
 
 def _profile(e: FloatArray, dt: FloatArray, weights: FloatArray) -> tuple[float, FloatArray, FloatArray]:
@@ -281,8 +299,8 @@ def final_fit(gyro: GyroAttitude, iv: _Intervals, cand: _Candidate, tau0: float,
     def solve(tau: float, weights: FloatArray | None) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray,
                                                                 FloatArray]:
         e, theta = _residual(gyro, iv, cand, tau)
-        e_p, _ = _residual(gyro, iv, cand, tau + delta_s)
-        e_m, _ = _residual(gyro, iv, cand, tau - delta_s)
+        e_p = _misfit(_gyro_relative(gyro, iv, tau + delta_s, cand.q_SG), cand)  # no theta needed at tau +- delta
+        e_m = _misfit(_gyro_relative(gyro, iv, tau - delta_s, cand.q_SG), cand)
         for i in range(3):
             jac[:, i, 3 + 3 * i: 6 + 3 * i] = theta
         jac[:, :, 12] = -(e_p - e_m) / (2.0 * delta_s)

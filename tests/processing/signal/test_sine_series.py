@@ -267,3 +267,31 @@ def test_evaluation_across_reseeds_and_sample_blocks_is_the_explicit_sum():
     np.testing.assert_array_equal(val, fit.evaluate(tt))
     np.testing.assert_array_equal(der, fit.derivative(tt))
     assert fit.evaluate(t1).shape == (3,) and fit.derivative(np.zeros(0)).shape == (0, 3)
+
+
+@pytest.mark.parametrize("n", [11_931, 8_195])  # N - 1 = 2 x 5 x 1193, 2 x 17 x 241: awkward lengths
+def test_chirp_route_of_long_awkward_series_equals_the_dst_and_the_general_route(n):
+    """Long series whose 2 (N - 1) is no fast FFT length take the chirp-z sums (CHIRP_MIN_SAMPLES): the same
+    coefficients and synthesis as the DST-I to rounding, and the same fit as the general QR route."""
+    import scipy.fft
+
+    from processing.signal.sine_series_basis import _use_chirp, dst_coefficients, dst_synthesis
+
+    assert _use_chirp(n, 70)
+    rng = np.random.default_rng(3)
+    x = rng.standard_normal((n, 3)) + 2.0
+    ref = scipy.fft.dst(x[1:-1], type=1, axis=0)[:70] / (n - 1)
+    np.testing.assert_allclose(dst_coefficients(x, 70), ref, rtol=0, atol=1e-14 * np.abs(ref).max())
+    c = rng.standard_normal((70, 2))
+    full = np.zeros((n - 2, 2))
+    full[:70] = c
+    syn = 0.5 * scipy.fft.dst(full, type=1, axis=0)
+    got = dst_synthesis(c, n)
+    assert np.all(got[[0, -1]] == 0.0)
+    np.testing.assert_allclose(got[1:-1], syn, rtol=0, atol=1e-13 * np.abs(syn).max())
+    t = 0.1 * np.arange(n)
+    y = np.column_stack([np.sin(t / 40.0), 1e-3 * t]) + 1e-3 * rng.standard_normal((n, 2))
+    dst, lsq = fit_sine_series(t, y, 70, method="dst"), fit_sine_series(t, y, 70, method="lstsq")
+    assert dst.method == "dst"
+    np.testing.assert_allclose(dst.fitted, lsq.fitted, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(dst.sine, lsq.sine, rtol=0, atol=1e-12)

@@ -248,3 +248,30 @@ def test_detector_counts_resolution_cells_not_grid_steps_on_a_padded_grid():
     n_band = int(np.sum((f > 0) & (f <= f[-1] - res)))
     assert peak.freq_hz == f[8000]
     assert peak.ratio == pytest.approx(144.0 * np.log(2.0) / np.log(n_band / per_res / 1e-3), rel=1e-12)
+
+
+def test_small_uniform_refinement_grids_by_angle_addition_equal_the_direct_sums():
+    """explained_sum_of_squares on a 9-point uniform grid (angle addition from the first frequency) equals the
+    direct least-squares sums of _ls_terms to rounding, and picks the same maximum."""
+    rng = np.random.default_rng(7)
+    t = 0.1 * np.arange(40_000)
+    v = rng.standard_normal((t.size, 3)) + 0.05 * np.sin(2 * np.pi * 0.4 * t + 0.3)[:, None]
+    grid = 0.4 + np.linspace(-1.0 / t[-1], 1.0 / t[-1], 9)
+    a, b, yc, ys = spectral._ls_terms(t, v, grid)
+    direct = np.sum(a * yc + b * ys, axis=1)
+    ess = spectral.explained_sum_of_squares(t, v, grid)
+    np.testing.assert_allclose(ess, direct, rtol=1e-10)
+    assert int(np.argmax(ess)) == int(np.argmax(direct))
+
+
+def test_a_single_line_is_reported_with_its_joint_fit():
+    """find_lines' one line is its first fit, which equals the joint fit at its frequency bit for bit."""
+    from processing.signal.spectral_lines import fit_sinusoids
+
+    rng = np.random.default_rng(8)
+    t = 3.0 + 0.1 * np.arange(30_000)
+    x = 0.01 * rng.standard_normal((t.size, 2)) + np.outer(np.sin(2 * np.pi * 0.37 * t), [1.0, 0.5])
+    (line,), _ = find_lines(t, x, min_freq_hz=0.01)
+    joint = fit_sinusoids(t, x, [line.fit.freq_hz])[0]
+    for name in ("freq_hz", "t0_s", "cos_coef", "sin_coef", "mean", "amplitude"):
+        assert np.array_equal(getattr(line.fit, name), getattr(joint, name)), name

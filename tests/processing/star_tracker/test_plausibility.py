@@ -248,3 +248,21 @@ def test_bad_inputs() -> None:
         check_star_tracker_gyro(st["time_tai_ns"][::-1], q, sc.truth.q_BS, g["time_tai_ns"], w)
     with pytest.raises(PlausibilityError, match="at least 10 pairs"):
         check_star_tracker_gyro(st["time_tai_ns"][:8], q[:8], sc.truth.q_BS, g["time_tai_ns"], w)
+
+
+def test_shared_interval_ends_take_the_next_start_attitude_bit_for_bit():
+    """_end_attitudes: the gyro attitude at an end shared with the next interval's start is that start's,
+    identical to propagating it again (the final fit's contiguous blocks)."""
+    from processing.star_tracker.plausibility_fit import GyroAttitude, _end_attitudes, block_indices, pair_intervals
+
+    rng = np.random.default_rng(4)
+    t_g = 0.1 * np.arange(20_001)
+    w = 1e-3 * np.sin(t_g[:, None] / 50.0 + np.arange(3)) + 1e-6 * rng.standard_normal((t_g.size, 3))
+    gyro = GyroAttitude.build(t_g, w)
+    t_st = 5.0 + np.arange(1_900) + 1e-3 * rng.standard_normal(1_900)
+    iv = pair_intervals(t_st, gyro, 1.5)
+    iv = iv.take(block_indices(iv.t_a.size, 1_000))
+    assert iv.next_shared.sum() > 900
+    u_a, u_b = _end_attitudes(gyro, iv, 0.037)
+    assert np.array_equal(u_a, gyro.attitude(iv.t_a + 0.037))
+    assert np.array_equal(u_b, gyro.attitude(iv.t_b + 0.037))
