@@ -219,7 +219,10 @@ def read_window(session: Session, store: ParquetStore, spacecraft_id: int, spec:
     table = pa.concat_tables(tables, promote_options="permissive")
     if sensor is not None:
         table = table.filter(pa.compute.equal(table.column("sensor"), sensor))
-    return _sort_unique(table, spec).select(list(empty_table(spec).schema.names))
+    one_sensor = sensor is not None or (len({f.sensors for f in files}) == 1 and "," not in files[0].sensors)
+    if not (one_sensor and _in_identity_order(table, spec)):  # the usual case: one sensor's files in time order
+        table = _sort_unique(table, spec)
+    return table.select(list(empty_table(spec).schema.names))
 
 
 def window_rows(session: Session, spacecraft_id: int, spec: StreamSpec, start_tai_ns: int | None = None,

@@ -203,3 +203,37 @@ def test_stored_columns_become_the_same_arrays_with_one_str_per_sensor() -> None
     np.testing.assert_array_equal(cols["wx"], [0.5, 1.5, 2.5, 3.5])
     one = outputs.table_columns(pa.table({"sensor": pa.array(["st1"] * 3)}))["sensor"]
     assert one.shape == (3,) and one.tolist() == ["st1"] * 3
+
+
+def test_a_window_is_read_in_identity_order_whatever_order_its_files_came_in(client, settings) -> None:
+    """read_window gives (sensor, time) order: one sensor's files uploaded later part first are sorted (the
+    catalog lists them in upload order); one sensor's files in time order are taken as they are; two sensors'
+    files are sorted by sensor, then time."""
+    from processing.streams import STREAMS
+    from storage.parquet_store import ParquetStore
+    from storage.telemetry import read_window
+
+    make_spacecraft(client, "sat1", CONFIG)
+    t = START + np.arange(30, dtype=np.int64) * 10**9
+
+    def gyro(rows, sensor):
+        return {"time_tai_ns": t[rows], "sensor": [sensor] * len(t[rows]), "wx": t[rows] / 1e18,
+                "wy": np.zeros(len(t[rows])), "wz": np.zeros(len(t[rows]))}
+
+    for rows, sensor in ((slice(20, 30), "g1"), (slice(0, 10), "g1"), (slice(10, 20), "g1"),
+                         (slice(0, 30), "g0")):
+        upload_columns(client, "sat1", "gyro", gyro(rows, sensor))
+    engine = make_engine(settings.database_url)
+    try:
+        with session_factory(engine)() as session:
+            store = ParquetStore(settings.telemetry_url)
+            for sensor in ("g1", "g0", None):
+                table = read_window(session, store, 1, STREAMS["gyro"], START, START + 10**12, sensor=sensor)
+                names = table.column("sensor").to_pylist()
+                times = table.column("time_tai_ns").to_numpy()
+                expected = sorted(zip(names, times.tolist(), strict=True))
+                assert list(zip(names, times.tolist(), strict=True)) == expected
+                assert len(expected) == (60 if sensor is None else 30) == len(set(expected))
+                np.testing.assert_array_equal(table.column("wx").to_numpy(), times / 1e18)
+    finally:
+        engine.dispose()
