@@ -9,7 +9,8 @@ type's ``run`` cuts its inputs with :func:`time_partitions` / :func:`split_colum
   with ``distributed.worker_client`` (the job's thread secedes while it waits, so a cluster of
   single-threaded workers cannot deadlock);
 - elsewhere (local executor, tests): in a thread pool of the job's worker process (numpy releases
-  the GIL in its heavy loops), or in order when there is one part.
+  the GIL in its heavy loops), or in order when there is one part, or one thread to spare (inside a branch of
+  :func:`map_concurrent`, which has as many threads as the machine has cores already).
 
 ``func`` must be a module-level function (Dask pickles it by reference), pure and deterministic, so
 both paths give the same results; the results come back in the order of ``parts``.
@@ -23,6 +24,7 @@ from __future__ import annotations
 
 import os
 import sys
+import threading
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 from typing import Any, TypeVar
@@ -131,13 +133,13 @@ def map_partitions(func: Callable[[T], R], parts: Sequence[T], *, progress: Prog
             for done, _ in enumerate(as_completed(futures), start=1):
                 progress(done / len(batches), f"{stage} {done}/{len(batches)}")
             return [r for batch in client.gather(futures) for r in batch]
-    if n == 1 or max_workers == 1:
+    workers = max_workers or min(n, _threads_here())
+    if workers == 1:
         results = []
         for i, p in enumerate(parts):
             results.append(func(p))
             progress((i + 1) / n, f"{stage} {i + 1}/{n}")
         return results
-    workers = max_workers or min(n, os.cpu_count() or 1)
     with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="partition") as pool:
         futures_local = [pool.submit(func, p) for p in parts]
         out = []
@@ -145,6 +147,23 @@ def map_partitions(func: Callable[[T], R], parts: Sequence[T], *, progress: Prog
             out.append(f.result())
             progress((i + 1) / n, f"{stage} {i + 1}/{n}")
         return out
+
+
+_branch = threading.local()
+
+
+def _threads_here() -> int:
+    """Threads a map_partitions may use here: the machine's cores, or a branch's share of them inside
+    :func:`map_concurrent` (two branches on two cores each run their parts in order, not four threads on two)."""
+    return int(getattr(_branch, "threads", 0)) or (os.cpu_count() or 1)
+
+
+def _in_branch(func: Callable[[T, Progress], R], part: T, progress: Progress, threads: int) -> R:
+    _branch.threads = threads
+    try:
+        return func(part, progress)
+    finally:
+        _branch.threads = 0
 
 
 POLL_S = 0.5
@@ -212,7 +231,8 @@ def map_concurrent(func: Callable[[T, Progress], R], parts: Sequence[T], progres
                 raise
             return list(client.gather(futures))
     with ThreadPoolExecutor(max_workers=len(parts), thread_name_prefix="concurrent") as pool:
-        local = [pool.submit(func, p, prog) for p, prog in zip(parts, progresses, strict=True)]
+        share = max(1, (os.cpu_count() or 1) // len(parts))
+        local = [pool.submit(_in_branch, func, p, prog, share) for p, prog in zip(parts, progresses, strict=True)]
         pending = set(local)
         while pending:
             poll([i for i, f in enumerate(local) if f not in pending])

@@ -8,6 +8,7 @@ import time
 
 import pytest
 
+from app.jobs import partitions
 from app.jobs.partitions import map_concurrent
 
 
@@ -71,3 +72,25 @@ def test_a_poll_that_raises_ends_the_wait():
     with pytest.raises(Stop):
         map_concurrent(slow_or_quick, ["slow", "quick"], [lambda f, s: None] * 2, poll=poll)
     assert time.monotonic() - t0 < 5
+
+
+def _thread_of_parts(part, progress):  # noqa: ANN001, ANN202 - a branch that splits its own work
+    return partitions.map_partitions(_thread_name, [part, part, part])
+
+
+def _thread_name(_part):  # noqa: ANN001, ANN202
+    return threading.current_thread().name
+
+
+@pytest.mark.parametrize("cores", [2, 4])
+def test_a_branch_splits_its_parts_over_its_share_of_the_cores(cores, monkeypatch):
+    """Two branches on two cores run their map_partitions in order in their own threads (not four threads on two
+    cores); with four cores each branch has two threads for its parts. Outside a branch: every core."""
+    monkeypatch.setattr(partitions.os, "cpu_count", lambda: cores)
+    names = partitions.map_concurrent(_thread_of_parts, ["a", "b"], [lambda f, s: None] * 2)
+    for branch in names:
+        if cores == 2:
+            assert len(set(branch)) == 1 and branch[0].startswith("concurrent")
+        else:
+            assert all(n.startswith("partition") for n in branch)
+    assert all(n.startswith("partition") for n in partitions.map_partitions(_thread_name, [1, 2, 3]))
