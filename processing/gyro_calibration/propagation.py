@@ -52,6 +52,10 @@ __all__ = [
 SCAN_BLOCK = 16
 """Block length of the recursive blocked prefix scan (measured fastest among 8..64 at 1e4..1e6 samples)."""
 
+FORCING_CHUNK = 8192
+"""Grid steps per chunk of the pseudo-derivatives' forcing sums (cache-sized: measured fastest among 2048..32768
+at 864,000 nodes, 70 ms against 183 ms for whole-grid arrays)."""
+
 FloatArray = NDArray[np.float64]
 
 
@@ -438,17 +442,43 @@ def _output_steps(grid: _Grid, u_nodes: FloatArray, scheme: int) -> _Outputs:
 def _pseudo_derivatives(grid: _Grid, u_nodes: FloatArray, out: _Outputs, scheme: int) -> FloatArray:
     """psi (3, m, M) at the outputs (eq. 7): forcing sums S_k = sum_{j<k} R(U_{j+1}) (A_j D_j + B_j D_{j+1})
     carried to the preceding node, plus the partial step."""
-    wc, jac, k, f = grid.wc, grid.jac, out.k, out.f
-    if jac is None:
-        g = _jacobian_sum_cf(0.25 * grid.dt, wc[:, :-1], wc[:, 1:], scheme)
-    else:
-        a, b = _jacobians_cf(0.25 * grid.dt, wc[:, :-1], wc[:, 1:], scheme)
-        g = _matmul_cf(a, jac[:, :, :-1]) + _matmul_cf(b, jac[:, :, 1:])
-    forcing = np.zeros((3, grid.m, grid.t.size))
-    np.cumsum(_matmul_cf(_dcm_cf(u_nodes[:, 1:]), g), axis=-1, out=forcing[:, :, 1:])
+    jac, k, f = grid.jac, out.k, out.f
     if jac is None:
         gp = _jacobian_sum_cf(0.25 * out.dtp, out.w_k, out.w_o, scheme)
     else:
         ap, bp = _jacobians_cf(0.25 * out.dtp, out.w_k, out.w_o, scheme)
         gp = _matmul_cf(ap, jac[:, :, k]) + _matmul_cf(bp, (1.0 - f) * jac[:, :, k] + f * jac[:, :, k + 1])
-    return _matmul_cf(out.rot.transpose(1, 0, 2), forcing[:, :, k]) + gp
+    return _matmul_cf(out.rot.transpose(1, 0, 2), _forcing_at(grid, u_nodes, k, scheme)) + gp
+
+
+def _step_forcing(grid: _Grid, a: int, b: int, scheme: int) -> FloatArray:
+    """A_j D_j + B_j D_{j+1} (3, m, b - a) of the steps j = a .. b-1 (rad per unit of each parameter)."""
+    tau, ws, we = 0.25 * grid.dt[a:b], grid.wc[:, a:b], grid.wc[:, a + 1 : b + 1]
+    if grid.jac is None:
+        return _jacobian_sum_cf(tau, ws, we, scheme)
+    sa, sb = _jacobians_cf(tau, ws, we, scheme)
+    return _matmul_cf(sa, grid.jac[:, :, a:b]) + _matmul_cf(sb, grid.jac[:, :, a + 1 : b + 1])
+
+
+def _forcing_at(grid: _Grid, u_nodes: FloatArray, k: NDArray[np.intp], scheme: int) -> FloatArray:
+    """The forcing sums S_k (3, m, M) at the nodes k (non-decreasing), S_0 = 0, S_{i+1} = S_i + R(U_{i+1}) g_i.
+
+    Made FORCING_CHUNK steps at a time, each chunk's running sum started from the previous chunk's last one:
+    the same additions in the same order as one cumulative sum over the whole grid (bit for bit), but the
+    temporaries (rotations, step Jacobians, their products) stay in cache instead of being (3, 3, N) arrays
+    written to and read back from memory (about 2.5x faster at 864,000 nodes)."""
+    n_steps = grid.dt.size
+    res = np.empty((3, grid.m, k.size))
+    run = np.zeros((3, grid.m, min(FORCING_CHUNK, n_steps) + 1))  # [..., 0]: the sum carried in
+    lo = 0
+    for a in range(0, n_steps, FORCING_CHUNK):
+        b = min(a + FORCING_CHUNK, n_steps)
+        part = run[:, :, : b - a + 1]
+        np.einsum("ij...,jk...->ik...", _dcm_cf(u_nodes[:, a + 1 : b + 1]), _step_forcing(grid, a, b, scheme),
+                  out=part[:, :, 1:])  # _matmul_cf written into the chunk
+        np.cumsum(part, axis=-1, out=part)  # part[..., i - a] = S_i for a <= i <= b
+        hi = int(np.searchsorted(k, b, side="right"))
+        res[:, :, lo:hi] = part[:, :, k[lo:hi] - a]
+        lo = hi
+        run[:, :, 0] = part[:, :, b - a]
+    return res
