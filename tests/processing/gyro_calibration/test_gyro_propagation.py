@@ -237,17 +237,19 @@ def whole_grid_forcing(grid: gp._Grid, u_nodes: np.ndarray, scheme: int) -> np.n
 @pytest.mark.parametrize("mounting", [False, True])
 def test_chunked_forcing_sums_are_bit_identical(scheme: int, chunk: int, mounting: bool,
                                                  monkeypatch: pytest.MonkeyPatch) -> None:
-    """The forcing sums made FORCING_CHUNK steps at a time equal the whole-grid cumulative sum bit for bit,
-    outputs on chunk boundaries, on the first and last node and repeated included."""
+    """The step quaternions and the forcing sums made CHUNK steps at a time equal the whole-grid forms bit for
+    bit, outputs on chunk boundaries, on the first and last node and repeated included."""
     rng = np.random.default_rng(11)
     n = 300
     t = np.cumsum(rng.uniform(0.08, 0.12, n))
     w = rng.normal(0, 0.05, (n, 3)) + [0.0, 0.3, 0.0]
     jac = -np.stack([np.cross(np.eye(3)[k], w) for k in range(3)], axis=-1) if mounting else None
     t_out = np.sort(np.concatenate([rng.uniform(t[0], t[-1], 50), t[[0, 7, 7, 14, 64, 128, -1]]]))
-    monkeypatch.setattr(gp, "FORCING_CHUNK", chunk)
+    monkeypatch.setattr(gp, "CHUNK", chunk)
     grid = gp._grid(t, w, t_out, jac)
     u_nodes = gp._node_attitudes(grid, scheme)
+    whole = gp._cumprod_cf(gp._kappa_cf(0.25 * grid.dt, grid.wc[:, :-1], grid.wc[:, 1:], scheme))
+    np.testing.assert_array_equal(u_nodes[:, 1:], whole)
     out = gp._output_steps(grid, u_nodes, scheme)
     expected = whole_grid_forcing(grid, u_nodes, scheme)[:, :, out.k]
     np.testing.assert_array_equal(gp._forcing_at(grid, u_nodes, out.k, scheme), expected)
