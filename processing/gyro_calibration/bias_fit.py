@@ -274,9 +274,7 @@ def _prepare(
     k0 = int(np.searchsorted(tg, ts[0], side="right")) - 1
     k1 = max(int(np.searchsorted(tg, ts[-1], side="left")), k0 + 1)
     t0 = float(tg[k0])
-    # (N, 3) in Fortran order: omega = w_R + Delta then is too, and the propagation's components-first (3, N)
-    # view of it needs no transposing copy on every evaluation
-    w_R = np.asfortranarray(rotations.quat_rotate(q_rg, wg[k0 : k1 + 1]))
+    w_R = _rotated_rates(q_rg, wg[k0 : k1 + 1])
     pb = Problem(
         t_g=tg[k0 : k1 + 1] - t0,
         w_R=w_R,
@@ -289,6 +287,22 @@ def _prepare(
         mounting=mounting,
     )
     return _Prepared(pb, order, sens_sorted, n_sensors, t0, q_rg)
+
+
+def _rotated_rates(q: FloatArray, w: FloatArray) -> FloatArray:
+    """R(q) w (N, 3) of rates w (N, 3) by one quaternion q (4,), in Fortran order: omega = w_R + Delta then is
+    too, and the propagation's components-first (3, N) view of it needs no transposing copy on every evaluation.
+
+    Bit for bit rotations.quat_rotate's v + q0 t + u x t, t = 2 u x v (u the vector part of q / |q|), written per
+    component straight into the columns (without its cross products' copies and the copy to Fortran order)."""
+    q0, u0, u1, u2 = rotations.quat_normalize(q)
+    v0, v1, v2 = w[:, 0], w[:, 1], w[:, 2]
+    t0, t1, t2 = 2.0 * (u1 * v2 - u2 * v1), 2.0 * (u2 * v0 - u0 * v2), 2.0 * (u0 * v1 - u1 * v0)
+    out = np.empty(w.shape, order="F")
+    out[:, 0] = v0 + q0 * t0 + (u1 * t2 - u2 * t1)
+    out[:, 1] = v1 + q0 * t1 + (u2 * t0 - u0 * t2)
+    out[:, 2] = v2 + q0 * t2 + (u0 * t1 - u1 * t0)
+    return out
 
 
 def fit_gyro_bias(
