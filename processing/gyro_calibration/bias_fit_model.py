@@ -126,14 +126,15 @@ def evaluate(pb: Problem, z: FloatArray, delta: FloatArray, q_mu: FloatArray, ja
     psi = np.concatenate([psi_z, prop.psi_out], axis=2)  # (M, 3, P), R axes at t_n
     psi_s = pb.rot_RS_T @ psi  # sensor axes
     # da/dx = -1/2 vec(r o psi) = -1/2 (r0 psi + r_vec x psi); the cross product written out per component
-    # (the products and differences np.cross forms, without its transposing copies of (M, P, 3) arrays)
+    # (the products and differences np.cross forms, without its transposing copies of (M, P, 3) arrays) and
+    # added in place (x * -0.5 is -0.5 * x bit for bit)
     r1, r2, r3 = r[:, 1:2], r[:, 2:3], r[:, 3:4]
     b0, b1, b2 = psi_s[:, 0], psi_s[:, 1], psi_s[:, 2]
-    cross = np.empty_like(psi_s)
-    cross[:, 0] = r2 * b2 - r3 * b1
-    cross[:, 1] = r3 * b0 - r1 * b2
-    cross[:, 2] = r1 * b1 - r2 * b0
-    jac = -0.5 * (r[:, :1, None] * psi_s + cross)
+    jac = r[:, :1, None] * psi_s
+    jac[:, 0] += r2 * b2 - r3 * b1
+    jac[:, 1] += r3 * b0 - r1 * b2
+    jac[:, 2] += r1 * b1 - r2 * b0
+    jac *= -0.5
     return Evaluation(a=a, jac=jac, phi=phi, prop=prop, q_model=q_model, psi=psi)
 
 
@@ -160,8 +161,9 @@ def initial_guess(pb: Problem) -> tuple[FloatArray, FloatArray]:
     """
     meas = quat_product(pb.q_meas, rotations.quat_conjugate(pb.q_RS))  # q_IR measured
     z0 = rotations.quat_to_mrp(rotations.quat_canonical(meas[0]))
-    ev = evaluate(pb, z0, np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0]), jacobian=False)
-    u = rotations.quat_normalize(ev.prop.u_out)
+    # the attitude propagated with Delta = 0 (the residuals at z0 are not needed: propagate, not evaluate)
+    prop = propagate(pb.t_g, pb.w_R + np.zeros(3), pb.t_st, scheme=pb.scheme, derivatives=False)
+    u = rotations.quat_normalize(prop.u_out)
     model_rel = quat_product(rotations.quat_conjugate(u[:-1]), u[1:])
     meas_rel = quat_product(rotations.quat_conjugate(meas[:-1]), meas[1:])
     d = rotations.quat_to_rotvec(quat_product(rotations.quat_conjugate(model_rel), meas_rel))

@@ -130,10 +130,14 @@ def _eye_minus_cross_cf(v: FloatArray, scale: FloatArray) -> FloatArray:
 def _pad_blocks(k: FloatArray, n_blocks: int) -> FloatArray:
     """(4, n) -> (4, SCAN_BLOCK, n_blocks), identity-padded, position within the block first."""
     n = k.shape[1]
-    padded = np.empty((4, n_blocks * SCAN_BLOCK))
-    padded[:, :n] = k
-    padded[0, n:], padded[1:, n:] = 1.0, 0.0
-    return np.ascontiguousarray(padded.reshape(4, n_blocks, SCAN_BLOCK).transpose(0, 2, 1))
+    full, rest = divmod(n, SCAN_BLOCK)
+    x = np.empty((4, SCAN_BLOCK, n_blocks))
+    xt = x.transpose(0, 2, 1)  # (4, n_blocks, SCAN_BLOCK) view: k copied in once, no padded intermediate
+    xt[:, :full] = k[:, : full * SCAN_BLOCK].reshape(4, full, SCAN_BLOCK)
+    if full < n_blocks:
+        xt[:, full, :rest] = k[:, full * SCAN_BLOCK :]
+        xt[0, full, rest:], xt[1:, full, rest:] = 1.0, 0.0
+    return x
 
 
 def _cumprod_cf(k: FloatArray, method: str = "blocked") -> FloatArray:
