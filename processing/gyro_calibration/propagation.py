@@ -140,7 +140,7 @@ def _pad_blocks(k: FloatArray, n_blocks: int) -> FloatArray:
     return x
 
 
-def _cumprod_cf(k: FloatArray, method: str = "blocked") -> FloatArray:
+def _cumprod_cf(k: FloatArray, method: str = "blocked", out: FloatArray | None = None) -> FloatArray:
     """Inclusive prefix products of (4, n) quaternions, recursive over blocks of SCAN_BLOCK.
 
     Inside the blocks: "blocked" runs along the SCAN_BLOCK positions, vectorised across all blocks at
@@ -148,13 +148,17 @@ def _cumprod_cf(k: FloatArray, method: str = "blocked") -> FloatArray:
     (log2(SCAN_BLOCK) + 1) n products). Either way the block totals are scanned recursively and multiplied
     back in, so the Python-level iteration count is O(SCAN_BLOCK log(n) / log(SCAN_BLOCK)), independent of
     the sample count up to that logarithm. Measured at n = 864,000: 0.05 s blocked, 0.12 s doubling.
+    out: a (4, n) array (rows contiguous) to write the products into, instead of a new one; returned.
     """
     n = k.shape[1]
     if n <= SCAN_BLOCK:
         x = k.copy()
         for i in range(1, n):
             x[:, i] = _qmul_cf(x[:, i - 1], x[:, i])
-        return x
+        if out is None:
+            return x
+        out[...] = x
+        return out
     n_blocks = -(-n // SCAN_BLOCK)
     x = _pad_blocks(k, n_blocks)  # (4, L, B): slices along L are contiguous runs of B
     if method == "blocked":
@@ -170,7 +174,16 @@ def _cumprod_cf(k: FloatArray, method: str = "blocked") -> FloatArray:
     totals = _cumprod_cf(np.ascontiguousarray(x[:, -1]), method)[:, :-1]
     for i in range(SCAN_BLOCK):  # one block position at a time: the temporaries stay in cache (25 % faster)
         x[:, i, 1:] = _qmul_cf(totals, x[:, i, 1:])
-    return x.transpose(0, 2, 1).reshape(4, -1)[:, :n]
+    seq = x.transpose(0, 2, 1)  # (4, n_blocks, SCAN_BLOCK): sequence order
+    if out is None:
+        return seq.reshape(4, -1)[:, :n]
+    full, rest = divmod(n, SCAN_BLOCK)
+    blocks = out[:, : full * SCAN_BLOCK].view()
+    blocks.shape = (4, full, SCAN_BLOCK)  # a view or an error, never a silent copy
+    blocks[...] = seq[:, :full]
+    if rest:
+        out[:, full * SCAN_BLOCK :] = seq[:, full, :rest]
+    return out
 
 
 def _kappa_cf(tau: FloatArray, ws: FloatArray, we: FloatArray, scheme: int) -> FloatArray:
@@ -421,7 +434,7 @@ def _node_attitudes(grid: _Grid, scheme: int) -> FloatArray:
         kappa[:, a:b] = _kappa_cf(0.25 * grid.dt[a:b], grid.wc[:, a:b], grid.wc[:, a + 1 : b + 1], scheme)
     u_nodes = np.empty((4, grid.t.size))
     u_nodes[:, 0] = (1.0, 0.0, 0.0, 0.0)
-    u_nodes[:, 1:] = _cumprod_cf(kappa)
+    _cumprod_cf(kappa, out=u_nodes[:, 1:])  # written in place (no (4, N) copy to assign)
     return u_nodes
 
 

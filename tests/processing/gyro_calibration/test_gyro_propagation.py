@@ -253,3 +253,13 @@ def test_chunked_forcing_sums_are_bit_identical(scheme: int, chunk: int, mountin
     out = gp._output_steps(grid, u_nodes, scheme)
     expected = whole_grid_forcing(grid, u_nodes, scheme)[:, :, out.k]
     np.testing.assert_array_equal(gp._forcing_at(grid, u_nodes, out.k, scheme), expected)
+
+
+@pytest.mark.parametrize("n", [1, 5, gp.SCAN_BLOCK, gp.SCAN_BLOCK + 1, 257, 6000, 5000])
+def test_cumprod_into_out_is_the_same(n: int) -> None:
+    kappa = rot.quat_normalize(np.random.default_rng(n).normal(size=(4, n)).T).T.copy()
+    dest = np.full((4, n + 3), np.nan)
+    got = gp._cumprod_cf(kappa, out=dest[:, 2:-1])
+    np.testing.assert_array_equal(got, gp._cumprod_cf(kappa))
+    np.testing.assert_array_equal(dest[:, 2:-1], gp._cumprod_cf(kappa))
+    assert np.all(np.isnan(dest[:, :2])) and np.all(np.isnan(dest[:, -1]))
