@@ -129,15 +129,21 @@ def _eye_minus_cross_cf(v: FloatArray, scale: FloatArray) -> FloatArray:
 
 def _pad_blocks(k: FloatArray, n_blocks: int) -> FloatArray:
     """(4, n) -> (4, SCAN_BLOCK, n_blocks), identity-padded, position within the block first."""
-    n = k.shape[1]
-    full, rest = divmod(n, SCAN_BLOCK)
     x = np.empty((4, SCAN_BLOCK, n_blocks))
-    xt = x.transpose(0, 2, 1)  # (4, n_blocks, SCAN_BLOCK) view: k copied in once, no padded intermediate
-    xt[:, :full] = k[:, : full * SCAN_BLOCK].reshape(4, full, SCAN_BLOCK)
-    if full < n_blocks:
-        xt[:, full, :rest] = k[:, full * SCAN_BLOCK :]
-        xt[0, full, rest:], xt[1:, full, rest:] = 1.0, 0.0
+    _fill_blocks(x, 0, k)
     return x
+
+
+def _fill_blocks(x: FloatArray, start: int, k: FloatArray) -> None:
+    """Write k (4, m) into the blocked x (4, SCAN_BLOCK, n_blocks) at sequence positions start .. start + m - 1
+    (start a multiple of SCAN_BLOCK) in one copy; a last, partial block is padded with the identity."""
+    full, rest = divmod(k.shape[1], SCAN_BLOCK)
+    b0 = start // SCAN_BLOCK
+    xt = x.transpose(0, 2, 1)  # (4, n_blocks, SCAN_BLOCK) view, sequence order
+    xt[:, b0 : b0 + full] = k[:, : full * SCAN_BLOCK].reshape(4, full, SCAN_BLOCK)
+    if rest:
+        xt[:, b0 + full, :rest] = k[:, full * SCAN_BLOCK :]
+        xt[0, b0 + full, rest:], xt[1:, b0 + full, rest:] = 1.0, 0.0
 
 
 def _cumprod_cf(k: FloatArray, method: str = "blocked", out: FloatArray | None = None) -> FloatArray:
@@ -159,8 +165,12 @@ def _cumprod_cf(k: FloatArray, method: str = "blocked", out: FloatArray | None =
             return x
         out[...] = x
         return out
-    n_blocks = -(-n // SCAN_BLOCK)
-    x = _pad_blocks(k, n_blocks)  # (4, L, B): slices along L are contiguous runs of B
+    return _cumprod_blocks(_pad_blocks(k, -(-n // SCAN_BLOCK)), n, method, out)
+
+
+def _cumprod_blocks(x: FloatArray, n: int, method: str, out: FloatArray | None) -> FloatArray:
+    """:func:`_cumprod_cf` of the n > SCAN_BLOCK quaternions in the blocked x (4, L, B) (:func:`_pad_blocks`;
+    slices along L are contiguous runs of B), overwritten."""
     if method == "blocked":
         for i in range(1, SCAN_BLOCK):
             x[:, i] = _qmul_cf(x[:, i - 1], x[:, i])
@@ -428,13 +438,18 @@ def _node_attitudes(grid: _Grid, scheme: int) -> FloatArray:
     """U_k (4, N) at the nodes: prefix products of the step quaternions of 003 §2.3 (these made CHUNK steps at a
     time, elementwise and so bit for bit the same, with cache-sized temporaries: 2x faster at 864,000)."""
     n_steps = grid.dt.size
-    kappa = np.empty((4, n_steps))
-    for a in range(0, n_steps, CHUNK):
-        b = min(a + CHUNK, n_steps)
-        kappa[:, a:b] = _kappa_cf(0.25 * grid.dt[a:b], grid.wc[:, a:b], grid.wc[:, a + 1 : b + 1], scheme)
     u_nodes = np.empty((4, grid.t.size))
     u_nodes[:, 0] = (1.0, 0.0, 0.0, 0.0)
-    _cumprod_cf(kappa, out=u_nodes[:, 1:])  # written in place (no (4, N) copy to assign)
+    if n_steps <= SCAN_BLOCK:
+        _cumprod_cf(_kappa_cf(0.25 * grid.dt, grid.wc[:, :-1], grid.wc[:, 1:], scheme), out=u_nodes[:, 1:])
+        return u_nodes
+    # the step quaternions go straight into the scan's blocked layout, the products straight into u_nodes
+    x = np.empty((4, SCAN_BLOCK, -(-n_steps // SCAN_BLOCK)))
+    step = max(CHUNK // SCAN_BLOCK, 1) * SCAN_BLOCK
+    for a in range(0, n_steps, step):
+        b = min(a + step, n_steps)
+        _fill_blocks(x, a, _kappa_cf(0.25 * grid.dt[a:b], grid.wc[:, a:b], grid.wc[:, a + 1 : b + 1], scheme))
+    _cumprod_blocks(x, n_steps, "blocked", u_nodes[:, 1:])
     return u_nodes
 
 
