@@ -364,7 +364,7 @@ def _solve(
 ) -> GyroBiasFit:
     """Steps 2-5 on prepared inputs with the angle random walk arw (3,) rad/sqrt(s)."""
     gn = gauss_newton(prep.pb, max_iterations, tolerance)
-    cov = _covariance(prep, gn.state, arw)
+    cov = _covariance(prep, gn.state, arw, gn.normal_matrix)
     mounting = _mounting_estimate(cov, gn.x, mounting_sigma_max_rad) if prep.pb.mounting else None
     return _fit_result(prep, gn, cov, arw, mounting)
 
@@ -390,11 +390,13 @@ class _Covariance:
     st_sigma: FloatArray
 
 
-def _covariance(prep: _Prepared, st: State, arw: FloatArray) -> _Covariance:
-    """Step 3: the paper's covariance and the honest sandwich (module docstring) at the final iterate."""
+def _covariance(prep: _Prepared, st: State, arw: FloatArray, c: FloatArray | None) -> _Covariance:
+    """Step 3: the paper's covariance and the honest sandwich (module docstring) at the final iterate; c: its
+    normal matrix when Gauss-Newton formed it already (the same sums), else None."""
     pb = prep.pb
     n_par = 9 if pb.mounting else 6
-    c, _ = normal_equations(st.ev, pb.weights)
+    if c is None:
+        c, _ = normal_equations(st.ev, pb.weights)
     c_inv, cond = scaled_inverse(c)
     sigma_w = float(np.sqrt(st.ev.phi / (3 * pb.t_st.size - n_par)))
     q_rg_used = rotations.quat_multiply(st.q_mu, prep.q_rg) if pb.mounting else prep.q_rg

@@ -122,19 +122,23 @@ def evaluate(pb: Problem, z: FloatArray, delta: FloatArray, q_mu: FloatArray, ja
     if not jacobian:
         empty = np.zeros((a.shape[0], 3, 0))
         return Evaluation(a=a, jac=empty, phi=phi, prop=prop, q_model=q_model, psi=empty)
-    psi_z = np.swapaxes(prop.rot_out, -1, -2) @ mrp_pseudo_derivatives(z)  # (M, 3, 3)
+    m = a.shape[0]
+    # R(U)^T dPsi/dz (M, 3, 3) as one (3 M, 3) @ (3, 3) product (bit for bit the batched one, 2x faster)
+    rot_t = np.ascontiguousarray(np.swapaxes(prop.rot_out, -1, -2)).reshape(3 * m, 3)
+    psi_z = (rot_t @ mrp_pseudo_derivatives(z)).reshape(m, 3, 3)
     psi = np.concatenate([psi_z, prop.psi_out], axis=2)  # (M, 3, P), R axes at t_n
     psi_s = pb.rot_RS_T @ psi  # sensor axes
-    # da/dx = -1/2 vec(r o psi) = -1/2 (r0 psi + r_vec x psi); the cross product written out per component
-    # (the products and differences np.cross forms, without its transposing copies of (M, P, 3) arrays) and
-    # added in place (x * -0.5 is -0.5 * x bit for bit)
-    r1, r2, r3 = r[:, 1:2], r[:, 2:3], r[:, 3:4]
-    b0, b1, b2 = psi_s[:, 0], psi_s[:, 1], psi_s[:, 2]
-    jac = r[:, :1, None] * psi_s
-    jac[:, 0] += r2 * b2 - r3 * b1
-    jac[:, 1] += r3 * b0 - r1 * b2
-    jac[:, 2] += r1 * b1 - r2 * b0
-    jac *= -0.5
+    # da/dx = -1/2 vec(r o psi) = -1/2 (r0 psi + r_vec x psi), the cross product written out per component
+    # (the products and differences np.cross forms) and added in place (x * -0.5 is -0.5 * x bit for bit), on
+    # components-first (3, P, M) copies: passes over M-long rows instead of (M, P) slices (2x faster)
+    r0, r1, r2, r3 = np.ascontiguousarray(r.T)
+    b0, b1, b2 = bs = np.ascontiguousarray(psi_s.transpose(1, 2, 0))
+    jac_cf = r0 * bs
+    jac_cf[0] += r2 * b2 - r3 * b1
+    jac_cf[1] += r3 * b0 - r1 * b2
+    jac_cf[2] += r1 * b1 - r2 * b0
+    jac_cf *= -0.5
+    jac = np.ascontiguousarray(jac_cf.transpose(2, 0, 1))
     return Evaluation(a=a, jac=jac, phi=phi, prop=prop, q_model=q_model, psi=psi)
 
 
@@ -188,13 +192,15 @@ class State:
 
 @dataclass(frozen=True)
 class GaussNewton:
-    """The final iterate, the number of iterations, whether it converged and why it stopped."""
+    """The final iterate, the number of iterations, whether it converged and why it stopped; normal_matrix: C
+    (P, P) of the final iterate's Jacobian when the iteration formed it (converged or stopped), else None."""
 
     state: State
     iterations: int
     converged: bool
     status: str
     mounting: bool
+    normal_matrix: FloatArray | None = None
 
     @property
     def x(self) -> FloatArray:
@@ -247,9 +253,10 @@ def gauss_newton(pb: Problem, max_iterations: int, tolerance: float) -> GaussNew
         dx = c_inv @ d
         sigma_w = max(np.sqrt(st.ev.phi / (3 * m - n_par)), SIGMA_FLOOR)
         if np.all(np.abs(dx) <= tolerance * sigma_w * np.sqrt(np.diag(c_inv))):
-            return GaussNewton(_first_order(pb, st, dx), iteration, True, "converged", pb.mounting)
+            # the first-order step keeps the Jacobian, so C is the final iterate's too
+            return GaussNewton(_first_order(pb, st, dx), iteration, True, "converged", pb.mounting, c)
         new = _line_search(pb, st, dx)
         if new is None:
-            return GaussNewton(st, iteration, False, "stopped: no step decreases Phi", pb.mounting)
+            return GaussNewton(st, iteration, False, "stopped: no step decreases Phi", pb.mounting, c)
         st = new
     return GaussNewton(st, max_iterations, False, f"not converged in {max_iterations} iterations", pb.mounting)
