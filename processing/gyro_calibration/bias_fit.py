@@ -274,21 +274,48 @@ def _prepare(
     k0 = int(np.searchsorted(tg, ts[0], side="right")) - 1
     k1 = max(int(np.searchsorted(tg, ts[-1], side="left")), k0 + 1)
     t0 = float(tg[k0])
-    # (N, 3) in Fortran order: omega = w_R + Delta then is too, and the propagation's components-first (3, N)
-    # view of it needs no transposing copy on every evaluation
-    w_R = np.asfortranarray(rotations.quat_rotate(q_rg, wg[k0 : k1 + 1]))
+    w_R = _rotated_rates(q_rg, wg[k0 : k1 + 1])
     pb = Problem(
         t_g=tg[k0 : k1 + 1] - t0,
         w_R=w_R,
         t_st=ts - t0,
         q_meas=rotations.quat_normalize(qm),
         q_RS=q_rs,
-        rot_RS_T=np.swapaxes(rotations.quat_to_dcm(q_rs), 1, 2),
+        rot_RS_T=np.swapaxes(_dcm_rows(q_rs), 1, 2),
         weights=wts,
         scheme=int(scheme),
         mounting=mounting,
     )
     return _Prepared(pb, order, sens_sorted, n_sensors, t0, q_rg)
+
+
+def _rotated_rates(q: FloatArray, w: FloatArray) -> FloatArray:
+    """R(q) w (N, 3) of rates w (N, 3) by one quaternion q (4,), in Fortran order: omega = w_R + Delta then is
+    too, and the propagation's components-first (3, N) view of it needs no transposing copy on every evaluation.
+
+    Bit for bit rotations.quat_rotate's v + q0 t + u x t, t = 2 u x v (u the vector part of q / |q|), written per
+    component straight into the columns (without its cross products' copies and the copy to Fortran order), 65536
+    rows at a time from a components-first copy (cache-sized, contiguous passes: 54 -> 11 ms at 864,000)."""
+    q0, u0, u1, u2 = rotations.quat_normalize(q)
+    out = np.empty(w.shape, order="F")
+    for a in range(0, w.shape[0], 65536):
+        v0, v1, v2 = np.ascontiguousarray(w[a : a + 65536].T)
+        t0, t1, t2 = 2.0 * (u1 * v2 - u2 * v1), 2.0 * (u2 * v0 - u0 * v2), 2.0 * (u0 * v1 - u1 * v0)
+        out[a : a + 65536, 0] = v0 + q0 * t0 + (u1 * t2 - u2 * t1)
+        out[a : a + 65536, 1] = v1 + q0 * t1 + (u2 * t0 - u0 * t2)
+        out[a : a + 65536, 2] = v2 + q0 * t2 + (u0 * t1 - u1 * t0)
+    return out
+
+
+def _dcm_rows(q: FloatArray) -> FloatArray:
+    """R(q) (M, 3, 3) of quaternions q (M, 4): bit for bit rotations.quat_to_dcm (q normalised, the same products,
+    sums and differences), written into the output instead of stacked from nested lists (19 -> 4 ms at 84,000)."""
+    w, x, y, z = rotations.quat_normalize(q).T
+    out = np.empty((q.shape[0], 3, 3))
+    out[:, 0, 0], out[:, 0, 1], out[:, 0, 2] = 1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - w * z), 2.0 * (x * z + w * y)
+    out[:, 1, 0], out[:, 1, 1], out[:, 1, 2] = 2.0 * (x * y + w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - w * x)
+    out[:, 2, 0], out[:, 2, 1], out[:, 2, 2] = 2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (x * x + y * y)
+    return out
 
 
 def fit_gyro_bias(
@@ -350,7 +377,7 @@ def _solve(
 ) -> GyroBiasFit:
     """Steps 2-5 on prepared inputs with the angle random walk arw (3,) rad/sqrt(s)."""
     gn = gauss_newton(prep.pb, max_iterations, tolerance)
-    cov = _covariance(prep, gn.state, arw)
+    cov = _covariance(prep, gn.state, arw, gn.normal_matrix)
     mounting = _mounting_estimate(cov, gn.x, mounting_sigma_max_rad) if prep.pb.mounting else None
     return _fit_result(prep, gn, cov, arw, mounting)
 
@@ -376,11 +403,13 @@ class _Covariance:
     st_sigma: FloatArray
 
 
-def _covariance(prep: _Prepared, st: State, arw: FloatArray) -> _Covariance:
-    """Step 3: the paper's covariance and the honest sandwich (module docstring) at the final iterate."""
+def _covariance(prep: _Prepared, st: State, arw: FloatArray, c: FloatArray | None) -> _Covariance:
+    """Step 3: the paper's covariance and the honest sandwich (module docstring) at the final iterate; c: its
+    normal matrix when Gauss-Newton formed it already (the same sums), else None."""
     pb = prep.pb
     n_par = 9 if pb.mounting else 6
-    c, _ = normal_equations(st.ev, pb.weights)
+    if c is None:
+        c, _ = normal_equations(st.ev, pb.weights)
     c_inv, cond = scaled_inverse(c)
     sigma_w = float(np.sqrt(st.ev.phi / (3 * pb.t_st.size - n_par)))
     q_rg_used = rotations.quat_multiply(st.q_mu, prep.q_rg) if pb.mounting else prep.q_rg

@@ -51,16 +51,21 @@ def honest_covariance(
     gamma = np.cumsum(lam, axis=0)  # Cov(eta_n) = Gamma_n
     f = np.swapaxes(ev.jac * w[None, :, None], 1, 2) @ k_mat  # (M, P, 3) = J^T W K
     s_rev = np.cumsum(f[::-1], axis=0)[::-1]  # S_i = sum_{n >= i} F_n
-    b_rw = np.einsum("nij,njk,nlk->il", s_rev, lam, s_rev)  # J^T W L W J
+    # J^T W L W J (kept as this einsum, and b_w below too: a BLAS product, 7x faster, reorders the sums, and
+    # the near-zero off-diagonal covariances then move by 1e-11 relative, beyond the golden tests' 1e-12)
+    b_rw = np.einsum("nij,njk,nlk->il", s_rev, lam, s_rev)
     # Expected gyro part of the residual mean squares: diag of L - 2 H L + H L H^T.
-    diag_l = np.einsum("nij,njk,nik->ni", k_mat, gamma, k_mat)
+    diag_l = np.einsum("nik,nik->ni", k_mat @ gamma, k_mat)
     s_after = np.concatenate([s_rev[1:], np.zeros((1, p, 3))], axis=0)  # sum_{m > n} F_m
     inner = np.cumsum(f @ gamma, axis=0) + s_after @ gamma  # (M, P, 3)
-    jc = ev.jac @ c_inv  # (M, 3, P)
-    # only the diagonals of H L = jc inner K^T and H L H^T = jc B jc^T enter (the same sums as the full
-    # (M, 3, 3) products would form for them, without the 6 off-diagonal terms per sample)
-    hl_diag = np.einsum("nip,npk,nik->ni", jc, inner, k_mat)
-    hlh_diag = np.einsum("nip,pq,niq->ni", jc, b_rw, jc)
+    jc = (ev.jac.reshape(-1, p) @ c_inv).reshape(m, 3, p)  # (M, 3, P), one product for all samples
+    # only the diagonals of H L = jc inner K^T and H L H^T = jc B jc^T enter (without the 6 off-diagonal
+    # terms per sample of the full (M, 3, 3) products); first the (M, 3, 3) resp. (3 M, P) matrix products,
+    # then the row-wise dot products (4-6x faster than the three-operand einsums; they enter the residual rms
+    # and sigma_st, which move by round-off, <= 1e-15 relative)
+    hl_diag = np.einsum("nik,nik->ni", jc @ inner, k_mat)
+    jc_rows = jc.reshape(-1, p)
+    hlh_diag = np.einsum("np,np->n", jc_rows @ b_rw, jc_rows).reshape(m, 3)
     rw_ms = diag_l - 2.0 * hl_diag + hlh_diag
 
     counts = np.maximum(np.bincount(sensor, minlength=n_sensors), 1).astype(float)
@@ -72,6 +77,7 @@ def honest_covariance(
     rw = np.maximum(rw / counts[:, None], 0.0)
     dof = max(1.0 - p / (3.0 * m), 1e-3)
     var_st = np.maximum(ms - rw, 0.0) / dof
-    b_w = np.einsum("nip,ni,niq->pq", ev.jac * w[None, :, None], var_st[sensor], ev.jac * w[None, :, None])
+    jw = ev.jac * w[None, :, None]
+    b_w = np.einsum("nip,ni,niq->pq", jw, var_st[sensor], jw)
     cov = 0.25 * c_inv @ (b_w + b_rw) @ c_inv
     return 0.5 * (cov + cov.T), np.sqrt(ms), np.sqrt(rw), np.sqrt(var_st)

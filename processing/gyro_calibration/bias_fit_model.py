@@ -35,6 +35,7 @@ __all__ = [
     "initial_guess",
     "linear_step",
     "normal_equations",
+    "quat_product",
     "scaled_inverse",
 ]
 
@@ -50,6 +51,20 @@ def cross_matrix(v: FloatArray) -> FloatArray:
     out[..., 0, 1], out[..., 0, 2] = -v[..., 2], v[..., 1]
     out[..., 1, 0], out[..., 1, 2] = v[..., 2], -v[..., 0]
     out[..., 2, 0], out[..., 2, 1] = -v[..., 1], v[..., 0]
+    return out
+
+
+def quat_product(p: FloatArray, q: FloatArray) -> FloatArray:
+    """Hamilton product p o q of (..., 4) quaternions (leading dimensions broadcast), bit for bit the arithmetic
+    of processing.attitude.rotations.quat_multiply (s = p0 q0 - ((p1 q1 + p2 q2) + p3 q3), v = p0 q_v + q0 p_v
+    + p_v x q_v) written per component: without its cross product and concatenation 5-9x faster at 84,000."""
+    p0, p1, p2, p3 = np.moveaxis(p, -1, 0)
+    q0, q1, q2, q3 = np.moveaxis(q, -1, 0)
+    out = np.empty((*np.broadcast_shapes(p.shape[:-1], q.shape[:-1]), 4))  # C order, as the original: sums
+    out[..., 0] = p0 * q0 - ((p1 * q1 + p2 * q2) + p3 * q3)  # over its results (Phi) depend on the layout
+    out[..., 1] = (p0 * q1 + q0 * p1) + (p2 * q3 - p3 * q2)
+    out[..., 2] = (p0 * q2 + q0 * p2) + (p3 * q1 - p1 * q3)
+    out[..., 3] = (p0 * q3 + q0 * p3) + (p1 * q2 - p2 * q1)
     return out
 
 
@@ -99,33 +114,38 @@ def evaluate(pb: Problem, z: FloatArray, delta: FloatArray, q_mu: FloatArray, ja
         rate_jac = np.concatenate([np.broadcast_to(np.eye(3), (pb.t_g.size, 3, 3)), -cross_matrix(w_rot)], axis=2)
     prop = propagate(pb.t_g, omega, pb.t_st, scheme=pb.scheme, rate_jacobian=rate_jac, derivatives=jacobian)
     p0 = rotations.mrp_to_quat(z)
-    q_model = rotations.quat_multiply(p0, prop.u_out)  # q_IR(t_n), |.| = |U| (scheme 1 drifts)
-    r = rotations.quat_multiply(rotations.quat_conjugate(pb.q_meas), rotations.quat_multiply(q_model, pb.q_RS))
+    q_model = quat_product(p0, prop.u_out)  # q_IR(t_n), |.| = |U| (scheme 1 drifts)
+    r = quat_product(rotations.quat_conjugate(pb.q_meas), quat_product(q_model, pb.q_RS))
     r = np.where(r[:, :1] < 0.0, -r, r)
     a = -r[:, 1:]
     phi = float(np.sum(pb.weights * a * a))
     if not jacobian:
         empty = np.zeros((a.shape[0], 3, 0))
         return Evaluation(a=a, jac=empty, phi=phi, prop=prop, q_model=q_model, psi=empty)
-    psi_z = np.swapaxes(prop.rot_out, -1, -2) @ mrp_pseudo_derivatives(z)  # (M, 3, 3)
+    m = a.shape[0]
+    # R(U)^T dPsi/dz (M, 3, 3) as one (3 M, 3) @ (3, 3) product (bit for bit the batched one, 2x faster)
+    rot_t = np.ascontiguousarray(np.swapaxes(prop.rot_out, -1, -2)).reshape(3 * m, 3)
+    psi_z = (rot_t @ mrp_pseudo_derivatives(z)).reshape(m, 3, 3)
     psi = np.concatenate([psi_z, prop.psi_out], axis=2)  # (M, 3, P), R axes at t_n
     psi_s = pb.rot_RS_T @ psi  # sensor axes
-    # da/dx = -1/2 vec(r o psi) = -1/2 (r0 psi + r_vec x psi); the cross product written out per component
-    # (the products and differences np.cross forms, without its transposing copies of (M, P, 3) arrays)
-    r1, r2, r3 = r[:, 1:2], r[:, 2:3], r[:, 3:4]
-    b0, b1, b2 = psi_s[:, 0], psi_s[:, 1], psi_s[:, 2]
-    cross = np.empty_like(psi_s)
-    cross[:, 0] = r2 * b2 - r3 * b1
-    cross[:, 1] = r3 * b0 - r1 * b2
-    cross[:, 2] = r1 * b1 - r2 * b0
-    jac = -0.5 * (r[:, :1, None] * psi_s + cross)
+    # da/dx = -1/2 vec(r o psi) = -1/2 (r0 psi + r_vec x psi), the cross product written out per component
+    # (the products and differences np.cross forms) and added in place (x * -0.5 is -0.5 * x bit for bit), on
+    # components-first (3, P, M) copies: passes over M-long rows instead of (M, P) slices (2x faster)
+    r0, r1, r2, r3 = np.ascontiguousarray(r.T)
+    b0, b1, b2 = bs = np.ascontiguousarray(psi_s.transpose(1, 2, 0))
+    jac_cf = r0 * bs
+    jac_cf[0] += r2 * b2 - r3 * b1
+    jac_cf[1] += r3 * b0 - r1 * b2
+    jac_cf[2] += r1 * b1 - r2 * b0
+    jac_cf *= -0.5
+    jac = np.ascontiguousarray(jac_cf.transpose(2, 0, 1))
     return Evaluation(a=a, jac=jac, phi=phi, prop=prop, q_model=q_model, psi=psi)
 
 
 def linear_step(ev: Evaluation, dx: FloatArray, weights: FloatArray) -> Evaluation:
     """The evaluation after a negligible step dx, to first order: a + J dx, q o (1, psi dx / 2)."""
     a = ev.a + ev.jac @ dx
-    q_model = rotations.quat_multiply(ev.q_model, rotations.rotvec_to_quat(ev.psi @ dx))
+    q_model = quat_product(ev.q_model, rotations.rotvec_to_quat(ev.psi @ dx))
     return replace(ev, a=a, phi=float(np.sum(weights * a * a)), q_model=q_model)
 
 
@@ -143,13 +163,14 @@ def initial_guess(pb: Problem) -> tuple[FloatArray, FloatArray]:
     d_n = rotvec((U_n^-1 U_{n+1})^-1 o m_n^-1 m_{n+1}) ~ int Delta dt (m_n = q_n o q_RS^-1), whose sum
     telescopes the tracker noise: Delta0 = sum d_n / (t_M - t_1).
     """
-    meas = rotations.quat_multiply(pb.q_meas, rotations.quat_conjugate(pb.q_RS))  # q_IR measured
+    meas = quat_product(pb.q_meas, rotations.quat_conjugate(pb.q_RS))  # q_IR measured
     z0 = rotations.quat_to_mrp(rotations.quat_canonical(meas[0]))
-    ev = evaluate(pb, z0, np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0]), jacobian=False)
-    u = rotations.quat_normalize(ev.prop.u_out)
-    model_rel = rotations.quat_multiply(rotations.quat_conjugate(u[:-1]), u[1:])
-    meas_rel = rotations.quat_multiply(rotations.quat_conjugate(meas[:-1]), meas[1:])
-    d = rotations.quat_to_rotvec(rotations.quat_multiply(rotations.quat_conjugate(model_rel), meas_rel))
+    # the attitude propagated with Delta = 0 (the residuals at z0 are not needed: propagate, not evaluate)
+    prop = propagate(pb.t_g, pb.w_R + np.zeros(3), pb.t_st, scheme=pb.scheme, derivatives=False)
+    u = rotations.quat_normalize(prop.u_out)
+    model_rel = quat_product(rotations.quat_conjugate(u[:-1]), u[1:])
+    meas_rel = quat_product(rotations.quat_conjugate(meas[:-1]), meas[1:])
+    d = rotations.quat_to_rotvec(quat_product(rotations.quat_conjugate(model_rel), meas_rel))
     span = pb.t_st[-1] - pb.t_st[0]
     delta0 = np.sum(d, axis=0) / span if span > 0 else np.zeros(3)
     return z0, delta0
@@ -171,13 +192,15 @@ class State:
 
 @dataclass(frozen=True)
 class GaussNewton:
-    """The final iterate, the number of iterations, whether it converged and why it stopped."""
+    """The final iterate, the number of iterations, whether it converged and why it stopped; normal_matrix: C
+    (P, P) of the final iterate's Jacobian when the iteration formed it (converged or stopped), else None."""
 
     state: State
     iterations: int
     converged: bool
     status: str
     mounting: bool
+    normal_matrix: FloatArray | None = None
 
     @property
     def x(self) -> FloatArray:
@@ -230,9 +253,10 @@ def gauss_newton(pb: Problem, max_iterations: int, tolerance: float) -> GaussNew
         dx = c_inv @ d
         sigma_w = max(np.sqrt(st.ev.phi / (3 * m - n_par)), SIGMA_FLOOR)
         if np.all(np.abs(dx) <= tolerance * sigma_w * np.sqrt(np.diag(c_inv))):
-            return GaussNewton(_first_order(pb, st, dx), iteration, True, "converged", pb.mounting)
+            # the first-order step keeps the Jacobian, so C is the final iterate's too
+            return GaussNewton(_first_order(pb, st, dx), iteration, True, "converged", pb.mounting, c)
         new = _line_search(pb, st, dx)
         if new is None:
-            return GaussNewton(st, iteration, False, "stopped: no step decreases Phi", pb.mounting)
+            return GaussNewton(st, iteration, False, "stopped: no step decreases Phi", pb.mounting, c)
         st = new
     return GaussNewton(st, max_iterations, False, f"not converged in {max_iterations} iterations", pb.mounting)

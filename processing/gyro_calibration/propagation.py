@@ -52,6 +52,11 @@ __all__ = [
 SCAN_BLOCK = 16
 """Block length of the recursive blocked prefix scan (measured fastest among 8..64 at 1e4..1e6 samples)."""
 
+CHUNK = 16384
+"""Grid steps per chunk of the step quaternions and of the pseudo-derivatives' forcing sums (cache-sized
+temporaries; the forcing sums measured 69-70 ms at 8192 and 16384 against 112 at 2048 and 183 ms for
+whole-grid arrays at 864,000 nodes, the step quaternions 9 ms at 16384 against 18 ms)."""
+
 FloatArray = NDArray[np.float64]
 
 
@@ -124,14 +129,24 @@ def _eye_minus_cross_cf(v: FloatArray, scale: FloatArray) -> FloatArray:
 
 def _pad_blocks(k: FloatArray, n_blocks: int) -> FloatArray:
     """(4, n) -> (4, SCAN_BLOCK, n_blocks), identity-padded, position within the block first."""
-    n = k.shape[1]
-    padded = np.empty((4, n_blocks * SCAN_BLOCK))
-    padded[:, :n] = k
-    padded[0, n:], padded[1:, n:] = 1.0, 0.0
-    return np.ascontiguousarray(padded.reshape(4, n_blocks, SCAN_BLOCK).transpose(0, 2, 1))
+    x = np.empty((4, SCAN_BLOCK, n_blocks))
+    _fill_blocks(x, 0, k)
+    return x
 
 
-def _cumprod_cf(k: FloatArray, method: str = "blocked") -> FloatArray:
+def _fill_blocks(x: FloatArray, start: int, k: FloatArray) -> None:
+    """Write k (4, m) into the blocked x (4, SCAN_BLOCK, n_blocks) at sequence positions start .. start + m - 1
+    (start a multiple of SCAN_BLOCK) in one copy; a last, partial block is padded with the identity."""
+    full, rest = divmod(k.shape[1], SCAN_BLOCK)
+    b0 = start // SCAN_BLOCK
+    xt = x.transpose(0, 2, 1)  # (4, n_blocks, SCAN_BLOCK) view, sequence order
+    xt[:, b0 : b0 + full] = k[:, : full * SCAN_BLOCK].reshape(4, full, SCAN_BLOCK)
+    if rest:
+        xt[:, b0 + full, :rest] = k[:, full * SCAN_BLOCK :]
+        xt[0, b0 + full, rest:], xt[1:, b0 + full, rest:] = 1.0, 0.0
+
+
+def _cumprod_cf(k: FloatArray, method: str = "blocked", out: FloatArray | None = None) -> FloatArray:
     """Inclusive prefix products of (4, n) quaternions, recursive over blocks of SCAN_BLOCK.
 
     Inside the blocks: "blocked" runs along the SCAN_BLOCK positions, vectorised across all blocks at
@@ -139,15 +154,23 @@ def _cumprod_cf(k: FloatArray, method: str = "blocked") -> FloatArray:
     (log2(SCAN_BLOCK) + 1) n products). Either way the block totals are scanned recursively and multiplied
     back in, so the Python-level iteration count is O(SCAN_BLOCK log(n) / log(SCAN_BLOCK)), independent of
     the sample count up to that logarithm. Measured at n = 864,000: 0.05 s blocked, 0.12 s doubling.
+    out: a (4, n) array (rows contiguous) to write the products into, instead of a new one; returned.
     """
     n = k.shape[1]
     if n <= SCAN_BLOCK:
         x = k.copy()
         for i in range(1, n):
             x[:, i] = _qmul_cf(x[:, i - 1], x[:, i])
-        return x
-    n_blocks = -(-n // SCAN_BLOCK)
-    x = _pad_blocks(k, n_blocks)  # (4, L, B): slices along L are contiguous runs of B
+        if out is None:
+            return x
+        out[...] = x
+        return out
+    return _cumprod_blocks(_pad_blocks(k, -(-n // SCAN_BLOCK)), n, method, out)
+
+
+def _cumprod_blocks(x: FloatArray, n: int, method: str, out: FloatArray | None) -> FloatArray:
+    """:func:`_cumprod_cf` of the n > SCAN_BLOCK quaternions in the blocked x (4, L, B) (:func:`_pad_blocks`;
+    slices along L are contiguous runs of B), overwritten."""
     if method == "blocked":
         for i in range(1, SCAN_BLOCK):
             x[:, i] = _qmul_cf(x[:, i - 1], x[:, i])
@@ -158,9 +181,19 @@ def _cumprod_cf(k: FloatArray, method: str = "blocked") -> FloatArray:
             s *= 2
     else:
         raise GyroPropagationError(f"method must be 'blocked' or 'doubling', got {method!r}")
-    totals = _cumprod_cf(np.ascontiguousarray(x[:, -1]), method)
-    x[:, :, 1:] = _qmul_cf(totals[:, None, :-1], x[:, :, 1:])
-    return x.transpose(0, 2, 1).reshape(4, -1)[:, :n]
+    totals = _cumprod_cf(np.ascontiguousarray(x[:, -1]), method)[:, :-1]
+    for i in range(SCAN_BLOCK):  # one block position at a time: the temporaries stay in cache (25 % faster)
+        x[:, i, 1:] = _qmul_cf(totals, x[:, i, 1:])
+    seq = x.transpose(0, 2, 1)  # (4, n_blocks, SCAN_BLOCK): sequence order
+    if out is None:
+        return seq.reshape(4, -1)[:, :n]
+    full, rest = divmod(n, SCAN_BLOCK)
+    blocks = out[:, : full * SCAN_BLOCK].view()
+    blocks.shape = (4, full, SCAN_BLOCK)  # a view or an error, never a silent copy
+    blocks[...] = seq[:, :full]
+    if rest:
+        out[:, full * SCAN_BLOCK :] = seq[:, full, :rest]
+    return out
 
 
 def _kappa_cf(tau: FloatArray, ws: FloatArray, we: FloatArray, scheme: int) -> FloatArray:
@@ -402,10 +435,21 @@ def _grid(t_s: ArrayLike, w: ArrayLike, t_out: ArrayLike, rate_jacobian: ArrayLi
 
 
 def _node_attitudes(grid: _Grid, scheme: int) -> FloatArray:
-    """U_k (4, N) at the nodes: prefix products of the step quaternions of 003 §2.3."""
+    """U_k (4, N) at the nodes: prefix products of the step quaternions of 003 §2.3 (these made CHUNK steps at a
+    time, elementwise and so bit for bit the same, with cache-sized temporaries: 2x faster at 864,000)."""
+    n_steps = grid.dt.size
     u_nodes = np.empty((4, grid.t.size))
     u_nodes[:, 0] = (1.0, 0.0, 0.0, 0.0)
-    u_nodes[:, 1:] = _cumprod_cf(_kappa_cf(0.25 * grid.dt, grid.wc[:, :-1], grid.wc[:, 1:], scheme))
+    if n_steps <= SCAN_BLOCK:
+        _cumprod_cf(_kappa_cf(0.25 * grid.dt, grid.wc[:, :-1], grid.wc[:, 1:], scheme), out=u_nodes[:, 1:])
+        return u_nodes
+    # the step quaternions go straight into the scan's blocked layout, the products straight into u_nodes
+    x = np.empty((4, SCAN_BLOCK, -(-n_steps // SCAN_BLOCK)))
+    step = max(CHUNK // SCAN_BLOCK, 1) * SCAN_BLOCK
+    for a in range(0, n_steps, step):
+        b = min(a + step, n_steps)
+        _fill_blocks(x, a, _kappa_cf(0.25 * grid.dt[a:b], grid.wc[:, a:b], grid.wc[:, a + 1 : b + 1], scheme))
+    _cumprod_blocks(x, n_steps, "blocked", u_nodes[:, 1:])
     return u_nodes
 
 
@@ -438,17 +482,48 @@ def _output_steps(grid: _Grid, u_nodes: FloatArray, scheme: int) -> _Outputs:
 def _pseudo_derivatives(grid: _Grid, u_nodes: FloatArray, out: _Outputs, scheme: int) -> FloatArray:
     """psi (3, m, M) at the outputs (eq. 7): forcing sums S_k = sum_{j<k} R(U_{j+1}) (A_j D_j + B_j D_{j+1})
     carried to the preceding node, plus the partial step."""
-    wc, jac, k, f = grid.wc, grid.jac, out.k, out.f
-    if jac is None:
-        g = _jacobian_sum_cf(0.25 * grid.dt, wc[:, :-1], wc[:, 1:], scheme)
-    else:
-        a, b = _jacobians_cf(0.25 * grid.dt, wc[:, :-1], wc[:, 1:], scheme)
-        g = _matmul_cf(a, jac[:, :, :-1]) + _matmul_cf(b, jac[:, :, 1:])
-    forcing = np.zeros((3, grid.m, grid.t.size))
-    np.cumsum(_matmul_cf(_dcm_cf(u_nodes[:, 1:]), g), axis=-1, out=forcing[:, :, 1:])
+    jac, k, f = grid.jac, out.k, out.f
     if jac is None:
         gp = _jacobian_sum_cf(0.25 * out.dtp, out.w_k, out.w_o, scheme)
     else:
         ap, bp = _jacobians_cf(0.25 * out.dtp, out.w_k, out.w_o, scheme)
         gp = _matmul_cf(ap, jac[:, :, k]) + _matmul_cf(bp, (1.0 - f) * jac[:, :, k] + f * jac[:, :, k + 1])
-    return _matmul_cf(out.rot.transpose(1, 0, 2), forcing[:, :, k]) + gp
+    return _matmul_cf(out.rot.transpose(1, 0, 2), _forcing_at(grid, u_nodes, k, scheme)) + gp
+
+
+def _step_forcing(grid: _Grid, a: int, b: int, scheme: int) -> FloatArray:
+    """A_j D_j + B_j D_{j+1} (3, m, b - a) of the steps j = a .. b-1 (rad per unit of each parameter)."""
+    tau, ws, we = 0.25 * grid.dt[a:b], grid.wc[:, a:b], grid.wc[:, a + 1 : b + 1]
+    if grid.jac is None:
+        return _jacobian_sum_cf(tau, ws, we, scheme)
+    sa, sb = _jacobians_cf(tau, ws, we, scheme)
+    return _matmul_cf(sa, grid.jac[:, :, a:b]) + _matmul_cf(sb, grid.jac[:, :, a + 1 : b + 1])
+
+
+def _forcing_at(grid: _Grid, u_nodes: FloatArray, k: NDArray[np.intp], scheme: int) -> FloatArray:
+    """The forcing sums S_k (3, m, M) at the nodes k, S_0 = 0, S_{i+1} = S_i + R(U_{i+1}) g_i.
+
+    Made CHUNK steps at a time, each chunk's running sum started from the previous chunk's last one:
+    the same additions in the same order as one cumulative sum over the whole grid (bit for bit), but the
+    temporaries (rotations, step Jacobians, their products) stay in cache instead of being (3, 3, N) arrays
+    written to and read back from memory (about 2.5x faster at 864,000 nodes). Unsorted k (output times
+    in any order) are handled in sorted order."""
+    res = np.empty((3, grid.m, k.size))
+    if k.size > 1 and np.any(k[1:] < k[:-1]):
+        order = np.argsort(k, kind="stable")
+        res[:, :, order] = _forcing_at(grid, u_nodes, k[order], scheme)
+        return res
+    n_steps = grid.dt.size
+    run = np.zeros((3, grid.m, min(CHUNK, n_steps) + 1))  # [..., 0]: the sum carried in
+    lo = 0
+    for a in range(0, n_steps, CHUNK):
+        b = min(a + CHUNK, n_steps)
+        part = run[:, :, : b - a + 1]
+        np.einsum("ij...,jk...->ik...", _dcm_cf(u_nodes[:, a + 1 : b + 1]), _step_forcing(grid, a, b, scheme),
+                  out=part[:, :, 1:])  # _matmul_cf written into the chunk
+        np.cumsum(part, axis=-1, out=part)  # part[..., i - a] = S_i for a <= i <= b
+        hi = int(np.searchsorted(k, b, side="right"))
+        res[:, :, lo:hi] = part[:, :, k[lo:hi] - a]
+        lo = hi
+        run[:, :, 0] = part[:, :, b - a]
+    return res

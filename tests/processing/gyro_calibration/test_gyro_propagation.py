@@ -222,3 +222,59 @@ def test_errors_say_what_was_expected() -> None:
         gp.propagate(t, w, [1.0], scheme=3)
     with pytest.raises(gp.GyroPropagationError, match=r"rate_jacobian must have shape \(5, 3, m\)"):
         gp.propagate(t, w, [1.0], rate_jacobian=np.zeros((5, 3)))
+
+
+def whole_grid_forcing(grid: gp._Grid, u_nodes: np.ndarray, scheme: int) -> np.ndarray:
+    """S_k (3, m, N) as one cumulative sum over (3, 3, N) arrays (the unchunked form, test only)."""
+    g = gp._step_forcing(grid, 0, grid.dt.size, scheme)
+    forcing = np.zeros((3, grid.m, grid.t.size))
+    np.cumsum(gp._matmul_cf(gp._dcm_cf(u_nodes[:, 1:]), g), axis=-1, out=forcing[:, :, 1:])
+    return forcing
+
+
+@pytest.mark.parametrize("scheme", [1, 2])
+@pytest.mark.parametrize("chunk", [1, 7, 64, 10_000])
+@pytest.mark.parametrize("mounting", [False, True])
+def test_chunked_forcing_sums_are_bit_identical(scheme: int, chunk: int, mounting: bool,
+                                                 monkeypatch: pytest.MonkeyPatch) -> None:
+    """The step quaternions and the forcing sums made CHUNK steps at a time equal the whole-grid forms bit for
+    bit, outputs on chunk boundaries, on the first and last node and repeated included."""
+    rng = np.random.default_rng(11)
+    n = 300
+    t = np.cumsum(rng.uniform(0.08, 0.12, n))
+    w = rng.normal(0, 0.05, (n, 3)) + [0.0, 0.3, 0.0]
+    jac = -np.stack([np.cross(np.eye(3)[k], w) for k in range(3)], axis=-1) if mounting else None
+    t_out = np.sort(np.concatenate([rng.uniform(t[0], t[-1], 50), t[[0, 7, 7, 14, 64, 128, -1]]]))
+    monkeypatch.setattr(gp, "CHUNK", chunk)
+    grid = gp._grid(t, w, t_out, jac)
+    u_nodes = gp._node_attitudes(grid, scheme)
+    whole = gp._cumprod_cf(gp._kappa_cf(0.25 * grid.dt, grid.wc[:, :-1], grid.wc[:, 1:], scheme))
+    np.testing.assert_array_equal(u_nodes[:, 1:], whole)
+    out = gp._output_steps(grid, u_nodes, scheme)
+    expected = whole_grid_forcing(grid, u_nodes, scheme)[:, :, out.k]
+    np.testing.assert_array_equal(gp._forcing_at(grid, u_nodes, out.k, scheme), expected)
+    shuffled = np.random.default_rng(3).permutation(out.k.size)  # output times in any order
+    got = gp._forcing_at(grid, u_nodes, out.k[shuffled], scheme)
+    np.testing.assert_array_equal(got, expected[:, :, shuffled])
+
+
+@pytest.mark.parametrize("n", [1, 5, gp.SCAN_BLOCK, gp.SCAN_BLOCK + 1, 257, 6000, 5000])
+def test_cumprod_into_out_is_the_same(n: int) -> None:
+    kappa = rot.quat_normalize(np.random.default_rng(n).normal(size=(4, n)).T).T.copy()
+    dest = np.full((4, n + 3), np.nan)
+    got = gp._cumprod_cf(kappa, out=dest[:, 2:-1])
+    np.testing.assert_array_equal(got, gp._cumprod_cf(kappa))
+    np.testing.assert_array_equal(dest[:, 2:-1], gp._cumprod_cf(kappa))
+    assert np.all(np.isnan(dest[:, :2])) and np.all(np.isnan(dest[:, -1]))
+
+
+def test_outputs_in_any_order() -> None:
+    """propagate at unsorted output times gives each time what the sorted call gives (bit for bit)."""
+    rng = np.random.default_rng(12)
+    t = np.cumsum(rng.uniform(0.08, 0.12, 500))
+    w = rng.normal(0, 0.05, (500, 3))
+    t_out = rng.uniform(t[0], t[-1], 60)
+    order = np.argsort(t_out)
+    p, ps = gp.propagate(t, w, t_out), gp.propagate(t, w, t_out[order])
+    np.testing.assert_array_equal(p.psi_out[order], ps.psi_out)
+    np.testing.assert_array_equal(p.u_out[order], ps.u_out)
