@@ -35,7 +35,6 @@ __all__ = [
     "initial_guess",
     "linear_step",
     "normal_equations",
-    "quat_product",
     "scaled_inverse",
 ]
 
@@ -51,20 +50,6 @@ def cross_matrix(v: FloatArray) -> FloatArray:
     out[..., 0, 1], out[..., 0, 2] = -v[..., 2], v[..., 1]
     out[..., 1, 0], out[..., 1, 2] = v[..., 2], -v[..., 0]
     out[..., 2, 0], out[..., 2, 1] = -v[..., 1], v[..., 0]
-    return out
-
-
-def quat_product(p: FloatArray, q: FloatArray) -> FloatArray:
-    """Hamilton product p o q of (..., 4) quaternions (leading dimensions broadcast), bit for bit the arithmetic
-    of processing.attitude.rotations.quat_multiply (s = p0 q0 - ((p1 q1 + p2 q2) + p3 q3), v = p0 q_v + q0 p_v
-    + p_v x q_v) written per component: without its cross product and concatenation 5-9x faster at 84,000."""
-    p0, p1, p2, p3 = np.moveaxis(p, -1, 0)
-    q0, q1, q2, q3 = np.moveaxis(q, -1, 0)
-    out = np.empty((*np.broadcast_shapes(p.shape[:-1], q.shape[:-1]), 4))  # C order, as the original: sums
-    out[..., 0] = p0 * q0 - ((p1 * q1 + p2 * q2) + p3 * q3)  # over its results (Phi) depend on the layout
-    out[..., 1] = (p0 * q1 + q0 * p1) + (p2 * q3 - p3 * q2)
-    out[..., 2] = (p0 * q2 + q0 * p2) + (p3 * q1 - p1 * q3)
-    out[..., 3] = (p0 * q3 + q0 * p3) + (p1 * q2 - p2 * q1)
     return out
 
 
@@ -114,8 +99,8 @@ def evaluate(pb: Problem, z: FloatArray, delta: FloatArray, q_mu: FloatArray, ja
         rate_jac = np.concatenate([np.broadcast_to(np.eye(3), (pb.t_g.size, 3, 3)), -cross_matrix(w_rot)], axis=2)
     prop = propagate(pb.t_g, omega, pb.t_st, scheme=pb.scheme, rate_jacobian=rate_jac, derivatives=jacobian)
     p0 = rotations.mrp_to_quat(z)
-    q_model = quat_product(p0, prop.u_out)  # q_IR(t_n), |.| = |U| (scheme 1 drifts)
-    r = quat_product(rotations.quat_conjugate(pb.q_meas), quat_product(q_model, pb.q_RS))
+    q_model = rotations.quat_multiply(p0, prop.u_out)  # q_IR(t_n), |.| = |U| (scheme 1 drifts)
+    r = rotations.quat_multiply(rotations.quat_conjugate(pb.q_meas), rotations.quat_multiply(q_model, pb.q_RS))
     r = np.where(r[:, :1] < 0.0, -r, r)
     a = -r[:, 1:]
     phi = float(np.sum(pb.weights * a * a))
@@ -145,7 +130,7 @@ def evaluate(pb: Problem, z: FloatArray, delta: FloatArray, q_mu: FloatArray, ja
 def linear_step(ev: Evaluation, dx: FloatArray, weights: FloatArray) -> Evaluation:
     """The evaluation after a negligible step dx, to first order: a + J dx, q o (1, psi dx / 2)."""
     a = ev.a + ev.jac @ dx
-    q_model = quat_product(ev.q_model, rotations.rotvec_to_quat(ev.psi @ dx))
+    q_model = rotations.quat_multiply(ev.q_model, rotations.rotvec_to_quat(ev.psi @ dx))
     return replace(ev, a=a, phi=float(np.sum(weights * a * a)), q_model=q_model)
 
 
@@ -163,14 +148,14 @@ def initial_guess(pb: Problem) -> tuple[FloatArray, FloatArray]:
     d_n = rotvec((U_n^-1 U_{n+1})^-1 o m_n^-1 m_{n+1}) ~ int Delta dt (m_n = q_n o q_RS^-1), whose sum
     telescopes the tracker noise: Delta0 = sum d_n / (t_M - t_1).
     """
-    meas = quat_product(pb.q_meas, rotations.quat_conjugate(pb.q_RS))  # q_IR measured
+    meas = rotations.quat_multiply(pb.q_meas, rotations.quat_conjugate(pb.q_RS))  # q_IR measured
     z0 = rotations.quat_to_mrp(rotations.quat_canonical(meas[0]))
     # the attitude propagated with Delta = 0 (the residuals at z0 are not needed: propagate, not evaluate)
     prop = propagate(pb.t_g, pb.w_R + np.zeros(3), pb.t_st, scheme=pb.scheme, derivatives=False)
     u = rotations.quat_normalize(prop.u_out)
-    model_rel = quat_product(rotations.quat_conjugate(u[:-1]), u[1:])
-    meas_rel = quat_product(rotations.quat_conjugate(meas[:-1]), meas[1:])
-    d = rotations.quat_to_rotvec(quat_product(rotations.quat_conjugate(model_rel), meas_rel))
+    model_rel = rotations.quat_multiply(rotations.quat_conjugate(u[:-1]), u[1:])
+    meas_rel = rotations.quat_multiply(rotations.quat_conjugate(meas[:-1]), meas[1:])
+    d = rotations.quat_to_rotvec(rotations.quat_multiply(rotations.quat_conjugate(model_rel), meas_rel))
     span = pb.t_st[-1] - pb.t_st[0]
     delta0 = np.sum(d, axis=0) / span if span > 0 else np.zeros(3)
     return z0, delta0

@@ -513,3 +513,20 @@ def test_quat_multiply_is_the_vector_form_bit_for_bit(shapes):
            * Rotation.from_quat(np.broadcast_to(qu, got.shape).reshape(-1, 4), scalar_first=True))
     np.testing.assert_allclose(rot.quat_canonical(rot.quat_multiply(pu, qu)).reshape(-1, 4),
                                rot.quat_canonical(ref.as_quat(scalar_first=True)), atol=1e-14)
+
+
+@pytest.mark.parametrize("shape", [(4,), (3000, 4), (5, 7, 4)])
+def test_quat_to_dcm_is_the_stacked_formula_bit_for_bit(shape):
+    """Written element by element, the matrix has the bits of the nested-list form stacked, and is scipy's matrix."""
+    q = np.random.default_rng(7).normal(size=shape)
+    u = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    w, x, y, z = np.moveaxis(u, -1, 0)
+    rows = [[1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - w * z), 2.0 * (x * z + w * y)],
+            [2.0 * (x * y + w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - w * x)],
+            [2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (x * x + y * y)]]
+    stacked = np.stack([np.stack(r, axis=-1) for r in rows], axis=-2)
+    got = rot.quat_to_dcm(q)
+    assert got.shape == (*shape[:-1], 3, 3) and got.flags.c_contiguous
+    assert np.array_equal(got, stacked)
+    ref = Rotation.from_quat(u.reshape(-1, 4), scalar_first=True).as_matrix()
+    np.testing.assert_allclose(got.reshape(-1, 3, 3), ref, atol=1e-15)
