@@ -15,7 +15,11 @@ from __future__ import annotations
 import io
 import json
 import math
+import os
+from collections import deque
 from collections.abc import Iterable, Iterator
+from concurrent.futures import Future, ThreadPoolExecutor
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -41,6 +45,8 @@ FIGURE_LINE_MAX_POINTS = 4_000
 FIGURE_MARKERS_MAX_POINTS = 20_000
 """Marker-only lines (scatter) with more points keep a regular subsample plus every column's extremes."""
 CSV_BATCH_ROWS = 65_536
+ENCODE_THREADS = 2
+"""Tables encoded (Arrow, Parquet, CSV) at the same time at job end, at most this many (and the machine's cores)."""
 
 if TYPE_CHECKING:  # matplotlib is imported by the job types, not at start-up
     from matplotlib.figure import Figure
@@ -152,8 +158,19 @@ def write_outputs(store: ArtifactStore, job_id: str, result: TaskResult,
     an ``outputs`` entry saying so (in place: the caller stores the same dict) and ``result.notes`` a note."""
     budget = _Budget(JOB_ARTIFACT_MAX_BYTES)
     out: list[StoredArtifact] = []
-    for name, columns in result.tables.items():
-        out += _write_table(store, job_id, name, columns, budget)
+    # the tables encoded side by side (Arrow and Parquet release the GIL) and stored in order, so the budget
+    # decides as it would one by one; at most one table more than the threads is held encoded at a time
+    threads = min(ENCODE_THREADS, os.cpu_count() or 1)
+    with ThreadPoolExecutor(max_workers=threads, thread_name_prefix="encode") as pool:
+        pending: deque[tuple[str, Future[_EncodedTable]]] = deque()
+        for name, columns in result.tables.items():
+            pending.append((name, pool.submit(_encode_table, columns)))
+            if len(pending) > threads:
+                done, encoded = pending.popleft()
+                out += _store_table(store, job_id, done, encoded.result(), budget)
+        while pending:
+            done, encoded = pending.popleft()
+            out += _store_table(store, job_id, done, encoded.result(), budget)
     for name, (content, media_type) in result.files.items():
         if budget.take(name, len(content)):
             out.append(store.write(job_id, name, content, kind="file", media_type=media_type,
@@ -183,26 +200,42 @@ def figure_png(fig: Figure) -> bytes:
     return buf.getvalue()
 
 
-def _write_table(store: ArtifactStore, job_id: str, name: str, columns: dict[str, Any],
-                 budget: _Budget) -> list[StoredArtifact]:
+@dataclass(frozen=True)
+class _EncodedTable:
+    rows: int  # before truncation
+    stored_rows: int
+    parquet: bytes
+    csv: bytes | None  # None: longer than CSV_STORED_MAX_ROWS (Parquet only)
+
+
+def _encode_table(columns: dict[str, Any]) -> _EncodedTable:
     n_rows = len(next(iter(columns.values()))) if columns else 0
     if n_rows > TABLE_MAX_ROWS:
         columns = {k: np.asarray(v)[:TABLE_MAX_ROWS] for k, v in columns.items()}
-        budget.outputs["truncated"][name] = {"rows": n_rows, "stored_rows": TABLE_MAX_ROWS}
     table = table_to_arrow(columns)
     buf = io.BytesIO()
     pq.write_table(table, buf, use_dictionary=text_columns(table))
-    if not budget.take(f"{name}.parquet", buf.tell()):
+    csv = None
+    if table.num_rows <= CSV_STORED_MAX_ROWS:
+        text = io.BytesIO()
+        pacsv.write_csv(csv_safe(table), text)
+        csv = text.getvalue()
+    return _EncodedTable(n_rows, table.num_rows, buf.getvalue(), csv)
+
+
+def _store_table(store: ArtifactStore, job_id: str, name: str, table: _EncodedTable,
+                 budget: _Budget) -> list[StoredArtifact]:
+    if table.stored_rows < table.rows:
+        budget.outputs["truncated"][name] = {"rows": table.rows, "stored_rows": table.stored_rows}
+    if not budget.take(f"{name}.parquet", len(table.parquet)):
         return []
-    out = [store.write(job_id, f"{name}.parquet", buf.getvalue(), kind="table",
+    out = [store.write(job_id, f"{name}.parquet", table.parquet, kind="table",
                        media_type="application/vnd.apache.parquet", description=f"table {name}")]
-    if table.num_rows > CSV_STORED_MAX_ROWS:
+    if table.csv is None:
         budget.outputs["parquet_only"].append(name)
         return out
-    buf = io.BytesIO()
-    pacsv.write_csv(csv_safe(table), buf)
-    if budget.take(f"{name}.csv", buf.tell()):
-        out.append(store.write(job_id, f"{name}.csv", buf.getvalue(), kind="table", media_type="text/csv",
+    if budget.take(f"{name}.csv", len(table.csv)):
+        out.append(store.write(job_id, f"{name}.csv", table.csv, kind="table", media_type="text/csv",
                                description=f"table {name}"))
     return out
 
