@@ -240,11 +240,14 @@ class _StreamPart:
 
 @dataclass(frozen=True)
 class _StreamScreening:
+    """What screening one stream gave; for GNSS also the track of its accepted states."""
+
     criteria: list[Criterion]
     n: int
     notes: list[str]
     findings: dict[str, Any]
     st_intervals: list[_Interval]
+    track: GnssTrack | None = None
 
 
 NEEDS_TRACK = frozenset({"magnetometer", "panel_currents", "gnss_visibility"})
@@ -265,16 +268,7 @@ class _GnssPart:
         return "gnss"
 
 
-@dataclass(frozen=True)
-class _GnssScreening:
-    criteria: list[Criterion]
-    n: int
-    notes: list[str]
-    findings: dict[str, Any]
-    track: GnssTrack | None
-
-
-def _screen_part(part: _GnssPart | _StreamPart) -> _GnssScreening | _StreamScreening:
+def _screen_part(part: _GnssPart | _StreamPart) -> _StreamScreening:
     """One part of :func:`screen`: the GNSS stream (its criteria and the track of its accepted states) or
     another stream."""
     if isinstance(part, _StreamPart):
@@ -283,7 +277,7 @@ def _screen_part(part: _GnssPart | _StreamPart) -> _GnssScreening | _StreamScree
     notes: list[str] = []
     findings: dict[str, Any] = {}
     track = screen_gnss(col, part.cols, part.p, part.reference_orbit, part.reference_frame, notes, findings)
-    return _GnssScreening(col.criteria(), col.n, notes, findings, track)
+    return _StreamScreening(col.criteria(), col.n, notes, findings, [], track)
 
 
 def _screen_stream(part: _StreamPart) -> _StreamScreening:
@@ -344,7 +338,7 @@ def screen(streams: Mapping[str, Columns], spacecraft: Spacecraft, params: Scree
     done: dict[str, _StreamScreening] = {}
     track: GnssTrack | None = None
     for part, out in zip(first, mapper(_screen_part, first), strict=True):
-        if isinstance(out, _GnssScreening):
+        if isinstance(part, _GnssPart):
             track = out.track
             notes += out.notes
             findings.update(out.findings)
