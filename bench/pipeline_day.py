@@ -9,7 +9,8 @@ stages, the figures and the output writing. Printed: wall and CPU seconds per st
 first), peak RSS of this process (ru_maxrss; simulation and upload included, so an upper bound), and a
 cProfile top ten by cumulative CPU time of the job.
 
-Run: ``.venv/bin/python bench/pipeline_day.py [--hours H] [--seed S] [--top N]`` (default 24 h; the issue's
+Run: ``.venv/bin/python bench/pipeline_day.py [--hours H] [--seed S] [--top N] [--serial | --in-order]
+[--profile-out F]`` (default 24 h; the issue's
 target: the job under 6 s on this machine). The machine is shared: compare CPU seconds when the load is high,
 and ``--no-profile`` for times without the profiler's overhead.
 """
@@ -101,6 +102,21 @@ def instrument(clock: Clock) -> None:
     runner.write_outputs = clock.wrap("output writing", runner.write_outputs)
 
 
+def in_order() -> None:
+    """Every map_partitions of the job types in order and the tables encoded one at a time (cProfile sees only the
+    thread it runs in)."""
+    from app.jobs import outputs, partitions
+
+    real = partitions.map_partitions
+
+    def serial(func: Any, parts: Any, **kw: Any) -> Any:
+        return real(func, parts, **{**kw, "max_workers": 1})
+
+    for name in ("data_screening", "star_tracker_accuracy"):
+        importlib.import_module(f"app.jobs.types.{name}").map_partitions = serial
+    outputs.ENCODE_THREADS = 1
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--hours", type=float, default=24.0)
@@ -109,7 +125,13 @@ def main() -> None:
     ap.add_argument("--no-profile", action="store_true", help="time without cProfile's overhead (no top list)")
     ap.add_argument("--profile-out", type=Path, help="also dump the job's cProfile stats to this file (pstats)")
     ap.add_argument("--serial", action="store_true", help="the stages one after the other (parallel_stages=false)")
+    ap.add_argument("--in-order", action="store_true",
+                    help="everything in the job's thread (--serial, partitions and table encoding in order), so that "
+                         "the profile sees all the work")
     a = ap.parse_args()
+    if a.in_order:
+        a.serial = True
+        in_order()
     start = int(timescales.iso_to_tai_ns(["2023-06-01T00:00:00Z"])[0])
     t0 = time.perf_counter()
     sc = simulate_seed003(start_tai_ns=start, duration_s=a.hours * 3600.0, seed=a.seed, st_period_s=1.0,
