@@ -161,16 +161,20 @@ def write_outputs(store: ArtifactStore, job_id: str, result: TaskResult,
     # the tables encoded side by side (Arrow and Parquet release the GIL) and stored in order, so the budget
     # decides as it would one by one; at most one table more than the threads is held encoded at a time
     threads = min(ENCODE_THREADS, os.cpu_count() or 1)
-    with ThreadPoolExecutor(max_workers=threads, thread_name_prefix="encode") as pool:
-        pending: deque[tuple[str, Future[_EncodedTable]]] = deque()
+    if threads == 1:  # one core (or ENCODE_THREADS = 1): here, one table at a time
         for name, columns in result.tables.items():
-            pending.append((name, pool.submit(_encode_table, columns)))
-            if len(pending) > threads:
+            out += _store_table(store, job_id, name, _encode_table(columns), budget)
+    else:
+        with ThreadPoolExecutor(max_workers=threads, thread_name_prefix="encode") as pool:
+            pending: deque[tuple[str, Future[_EncodedTable]]] = deque()
+            for name, columns in result.tables.items():
+                pending.append((name, pool.submit(_encode_table, columns)))
+                if len(pending) > threads:
+                    done, encoded = pending.popleft()
+                    out += _store_table(store, job_id, done, encoded.result(), budget)
+            while pending:
                 done, encoded = pending.popleft()
                 out += _store_table(store, job_id, done, encoded.result(), budget)
-        while pending:
-            done, encoded = pending.popleft()
-            out += _store_table(store, job_id, done, encoded.result(), budget)
     for name, (content, media_type) in result.files.items():
         if budget.take(name, len(content)):
             out.append(store.write(job_id, name, content, kind="file", media_type=media_type,

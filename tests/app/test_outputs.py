@@ -51,7 +51,11 @@ def test_long_table_parquet_only_and_its_csv_on_request(tmp_path, monkeypatch):
     assert b"".join(outputs.csv_chunks(short.with_suffix(".parquet"))) == short.with_suffix(".csv").read_bytes()
 
 
-def test_tables_truncated_and_left_out_within_the_job_budget(tmp_path, monkeypatch):
+@pytest.mark.parametrize("threads", [1, 2])
+def test_tables_truncated_and_left_out_within_the_job_budget(tmp_path, monkeypatch, threads):
+    """The same decisions whether the tables are encoded one at a time here or side by side."""
+    monkeypatch.setattr(outputs, "ENCODE_THREADS", threads)
+    monkeypatch.setattr(outputs.os, "cpu_count", lambda: 2)
     monkeypatch.setattr(outputs, "TABLE_MAX_ROWS", 500)
     monkeypatch.setattr(outputs, "JOB_ARTIFACT_MAX_BYTES", 40_000)
     store = ArtifactStore(tmp_path)
