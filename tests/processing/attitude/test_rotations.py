@@ -530,3 +530,19 @@ def test_quat_to_dcm_is_the_stacked_formula_bit_for_bit(shape):
     assert np.array_equal(got, stacked)
     ref = Rotation.from_quat(u.reshape(-1, 4), scalar_first=True).as_matrix()
     np.testing.assert_allclose(got.reshape(-1, 3, 3), ref, atol=1e-15)
+
+
+@pytest.mark.parametrize("shapes", [((4,), (140_000, 3)), ((300, 4), (300, 3)), ((5, 1, 4), (7, 3))])
+def test_quat_rotate_is_the_vector_form_bit_for_bit(shapes):
+    """Per component, the rotation has the bits of v + q0 t + u x t, t = 2 u x v (numpy's cross) for broadcast
+    shapes (one quaternion rotating a day of rates, as the gyro fit uses it, included), and is scipy's rotation."""
+    rng = np.random.default_rng(6)
+    q, v = rng.normal(size=shapes[0]), rng.normal(size=shapes[1]) * 1e-3
+    u = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    t = 2.0 * np.cross(u[..., 1:], v)
+    vector_form = v + u[..., :1] * t + np.cross(u[..., 1:], t)
+    got = rot.quat_rotate(q, v)
+    assert got.shape == vector_form.shape and np.array_equal(got, vector_form)
+    full = np.array(np.broadcast_to(u, (*got.shape[:-1], 4))).reshape(-1, 4)
+    ref = Rotation.from_quat(full, scalar_first=True).apply(np.array(np.broadcast_to(v, got.shape)).reshape(-1, 3))
+    np.testing.assert_allclose(got.reshape(-1, 3), ref, atol=1e-17)
