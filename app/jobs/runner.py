@@ -26,7 +26,6 @@ from app.jobs.outputs import jsonable, table_columns, write_outputs
 from app.jobs.registry import JobType, registry
 from app.reports.inputs import describe_inputs
 from app.settings import Settings
-from processing.samples import sensor_index
 from processing.screening.flags import filter_streams
 from processing.spacecraft import IDENTITY_QUATERNION, Spacecraft
 from processing.streams import STREAMS
@@ -242,15 +241,6 @@ def apply_magnetometer_calibration(streams: dict[str, dict[str, np.ndarray]], va
     return out, notes
 
 
-def input_counts(inputs: TaskInputs) -> dict[str, dict[str, int]]:
-    counts: dict[str, dict[str, int]] = {}
-    for name, cols in inputs.streams.items():
-        sensors, index = sensor_index(cols["sensor"])
-        n = np.bincount(index, minlength=len(sensors))
-        counts[name] = {s: int(k) for s, k in zip(sensors, n, strict=True)}
-    return counts
-
-
 def execute(job_id: str, settings: Settings) -> str:
     """Run a claimed (running) job to a final state; returns that state."""
     engine = make_engine(settings.database_url)
@@ -287,8 +277,10 @@ def _execute(job_id: str, settings: Settings, sessions: sessionmaker[Session], a
             spacecraft_id = job.spacecraft_id
         # what the record says of the inputs, taken now: the telemetry is let go once the task has run, before
         # the figures and artifacts (the largest arrays of a long window need not be held twice)
-        counts = input_counts(inputs)
-        coverage = jsonable(describe_inputs(inputs.streams, inputs.start_tai_ns, inputs.end_tai_ns))
+        described = describe_inputs(inputs.streams, inputs.start_tai_ns, inputs.end_tai_ns)
+        counts = {name: {sensor: int(d["n_samples"]) for sensor, d in described.get(name, {}).items()}
+                  for name in inputs.streams}  # samples per stream and sensor
+        coverage = jsonable(described)
         progress(0.05, "computing")
         result = job_type.run(inputs, params, progress)
         del inputs

@@ -411,7 +411,7 @@ def _compare_segment(part: _ComparePart) -> _SegmentComparison:
         gf = fit_gyro_segment(seg, np.arange(g_seg.size), g_seg, w_seg, fit)
     tg, gfit, resid = gf.t_s, gf.fit, gf.residuals
     rss_s = np.sum(resid**2, axis=0)
-    seg_sines = segment_line_fits(gf, line_fits) if sines is None or w_seg is not None else sines
+    seg_sines = segment_line_fits(gf, line_fits) if sines is None else sines
     if seg_sines:
         resid = resid - sum(fs.evaluate(tg) for fs in seg_sines)
     inside = (tg >= 0.0) & (tg <= fit.span_s)
