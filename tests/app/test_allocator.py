@@ -24,10 +24,11 @@ def faults(rounds=30):
     return resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before
 
 faults(2)
-first = faults()
+before10, before30 = faults(10), faults(30)
 took = reuse_large_blocks()
 again = reuse_large_blocks()
-print(json.dumps({"before": first, "took": took, "again": again, "after": faults()}))
+faults(1)  # the heap grows once to hold the block (its pages may come as 4 KiB or huge pages: not counted)
+print(json.dumps({"before10": before10, "before30": before30, "took": took, "again": again, "after": faults()}))
 """
 
 
@@ -38,6 +39,10 @@ def test_large_temporaries_are_reused_once_the_thresholds_are_set() -> None:
                          check=True)
     r = json.loads(out.stdout.strip().splitlines()[-1])
     assert r["took"] and r["again"]
-    per_round = r["before"] / 30  # every round maps its block afresh and faults its pages in
-    assert per_round > 100
-    assert r["after"] < 2 * per_round  # the block is reused: its pages fault in once, in 30 rounds
+    # before: every round maps its block afresh and faults its pages in, so the count grows with the rounds
+    # (how many faults a round costs depends on the kernel's page sizes, so only the proportion is asserted)
+    per_round = r["before30"] / 30
+    assert per_round > 50
+    assert 2.5 * r["before10"] < r["before30"] < 3.5 * r["before10"]
+    # after: the block stays in the heap and is reused; 30 rounds cost less than one fresh round did
+    assert r["after"] < per_round
