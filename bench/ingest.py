@@ -2,7 +2,8 @@
 ``pyarrow.parquet.write_table`` of the same table in the same run, and the server's peak memory.
 
 Run: ``make bench`` (or ``.venv/bin/python bench/ingest.py [--rows N] [--repeat K] [--format csv] [--py-spy OUT]``).
-``--format csv`` uploads the same table as CSV (the baseline stays the plain Parquet write of the table).
+``--format csv`` uploads the same table as CSV: the baseline stays the plain Parquet write of the table, and the
+CSV is also read and written by pandas (``read_csv`` + ``to_parquet``, the issue's CSV baseline) in the same run.
 Targets: >= 500,000 rows/s end to end and >= 0.3 of the plain pyarrow write (issue 24: 1e7 rows within
 3x of the plain write, i.e. ratio >= 0.33); the server's peak RSS (VmHWM of the server process, read
 from /proc after the uploads; Linux) under 2x the body size. ``--py-spy OUT`` records a py-spy profile
@@ -25,6 +26,7 @@ import urllib.parse
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pyarrow as pa
 import pyarrow.csv as pacsv
 import pyarrow.parquet as pq
@@ -99,7 +101,7 @@ def main() -> None:
                 spy = subprocess.Popen([spy_exe, "record", "--pid", str(pid), "--format", "speedscope",
                                         "--output", args.py_spy, "--rate", "50", "--nonblocking"])
                 time.sleep(1.0)
-            service, plain = [], []
+            service, plain, pandas_s = [], [], []
             for k in range(args.repeat):
                 # a fresh time range each round so every row is new (no duplicate short-cut)
                 table = gyro_table(args.rows, 1.7e9 + k * args.rows * 0.1 + k * 86_400, seed=k)
@@ -114,6 +116,11 @@ def main() -> None:
                 t = time.perf_counter()
                 pq.write_table(table, Path(tmp) / f"plain{k}.parquet")
                 plain.append(time.perf_counter() - t)
+
+                if args.format == "csv":
+                    t = time.perf_counter()
+                    pd.read_csv(io.BytesIO(payload)).to_parquet(Path(tmp) / f"pandas{k}.parquet")
+                    pandas_s.append(time.perf_counter() - t)
 
                 t = time.perf_counter()
                 status, body = post(base, "/api/v1/spacecraft/bench/telemetry/gyro", payload, MEDIA[args.format])
@@ -131,6 +138,11 @@ def main() -> None:
             print(f"plain pyarrow.parquet.write_table of the same table:                     "
                   f"best {best_p:.3f} s = {args.rows / best_p:,.0f} rows/s (median {np.median(plain):.3f} s)")
             print(f"ratio service/plain (throughput): {best_p / best_s:.2f}  (target >= 0.30)")
+            if pandas_s:
+                best_pd = min(pandas_s)
+                print(f"pandas read_csv + to_parquet of the same CSV:                             "
+                      f"best {best_pd:.3f} s = {args.rows / best_pd:,.0f} rows/s (median {np.median(pandas_s):.3f} s)")
+                print(f"ratio service/pandas (time): {best_s / best_pd:.2f}  (the issue measured 3-4 before streaming)")
             print(f"target 500,000 rows/s end to end: {'met' if args.rows / best_s >= 5e5 else 'NOT met'}")
             body_mb = len(payload) / 1e6
             print(f"server RSS before the uploads {rss_before:.0f} MB, peak (VmHWM) {peak:.0f} MB: "
